@@ -1,0 +1,164 @@
+"""The ``dlo-course`` command line.
+
+Each subcommand is a thin wrapper: it parses flags and calls one library function, so the
+lessons and the command line always run the same code. Heavy modules (torch, pybullet) are
+imported inside the commands to keep ``dlo-course --help`` instant.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from dlo_course.paths import DATA_DIR
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+def main() -> None:
+    """dlo-course: deep RL for the shape control of deformable linear objects."""
+
+
+@main.command()
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              default=DATA_DIR / "rod.vtk", show_default=True, help="VTK file to write.")
+def mesh(out: Path) -> None:
+    """Generate the paper's tetrahedral rod mesh (200 nodes, 392 tetrahedra)."""
+    from dlo_course.mesh import make_rod_mesh, write_vtk
+
+    m = make_rod_mesh()
+    write_vtk(m, out)
+    click.echo(f"wrote {out}: {len(m.points)} nodes, {len(m.tets)} tetrahedra, "
+               f"{len(m.edges)} edges, {len(m.surface_triangles)} surface triangles")
+
+
+@main.command()
+@click.option("--box", type=click.Choice(["small", "large"]), required=True,
+              help="Which deformation box of the paper to sweep.")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Output .npz (default: data/databases/BOX.npz).")
+@click.option("--settle-steps", type=int, default=None,
+              help="Extra actions after each move, before recording (default: DatabaseSweep's).")
+@click.option("--time-mode", type=click.Choice(["code", "paper"]), default="code",
+              show_default=True, help="Time per action (see SimParams.time_mode).")
+@click.option("--limit", type=int, default=None,
+              help="Stop after this many deformations (for a quick look; the file is partial).")
+def database(box: str, out: Path | None, settle_steps: int | None, time_mode: str,
+             limit: int | None) -> None:
+    """Sweep the tip through a paper box and record every deformation (Fig. 3)."""
+    from dlo_course.database import generate_database
+
+    path = generate_database(box, out=out, settle_steps=settle_steps, time_mode=time_mode,
+                             limit=limit, progress=True)
+    click.echo(f"wrote {path}")
+
+
+@main.command("plot-boxes")
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              default=Path("reports/fig3_boxes.png"), show_default=True)
+def plot_boxes(out: Path) -> None:
+    """Draw both deformation boxes and the recorded tip positions (the paper's Fig. 3)."""
+    from dlo_course.plots import plot_databases
+
+    plot_databases(out=out)
+    click.echo(f"wrote {out}")
+
+
+@main.group()
+def bench() -> None:
+    """Speed measurements (benchmarks, not tests)."""
+
+
+@bench.command("env")
+@click.option("--steps", type=int, default=40, show_default=True,
+              help="Actions timed per time setting.")
+@click.option("--paper-steps", type=int, default=4, show_default=True,
+              help="Actions timed for the (20x slower) paper time setting.")
+@click.option("--seed", type=int, default=0, show_default=True)
+def bench_env(steps: int, paper_steps: int, seed: int) -> None:
+    """Actions per second of one environment, and where a step's time goes."""
+    from dlo_course.bench import bench_env as run
+
+    run(steps=steps, paper_steps=paper_steps, seed=seed)
+
+
+# --- learning: train / plot (DDPG + MPI trainer) ---
+
+
+@main.command()
+@click.option("--preset", "preset_name", type=click.Choice(["smoke", "laptop", "paper"]),
+              default="smoke", show_default=True,
+              help="Starting configuration: smoke (seconds, CI), laptop (~1 h on 4 cores), "
+                   "paper (32 agents x 63 episodes x 300 steps). The flags below override it.")
+@click.option("--env", "env_id", default=None,
+              help="Gymnasium id of any continuous-control environment [preset: DLOShape-v0]. "
+                   "Changing it drops the preset's environment arguments.")
+@click.option("--nodes", type=click.IntRange(min=1), default=None,
+              help="Rod nodes to control (2, 4 or 6) [preset: 2].")
+@click.option("--episodes", type=click.IntRange(min=1), default=None,
+              help="Episodes per agent [preset].")
+@click.option("--steps-per-episode", type=click.IntRange(min=1), default=None,
+              help="Maximum actions per episode [preset].")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Run directory [runs/PRESET_ENV_nNODES_seedSEED].")
+@click.option("--resume", is_flag=True, help="Continue the run in --out from its last checkpoint.")
+@click.option("--overwrite", is_flag=True, help="Start afresh even if --out holds a run.")
+@click.option("--reduce", type=click.Choice(["sum", "mean"]), default=None,
+              help="Combine the agents' gradients by sum (the paper) or mean [preset: sum].")
+@click.option("--checkpoint-every", type=click.IntRange(min=1), default=None,
+              help="Episodes between checkpoints [preset].")
+@click.option("--progress/--no-progress", default=True, show_default=True,
+              help="Progress bar (rank 0).")
+def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int | None,
+          steps_per_episode: int | None, seed: int, out: Path | None, resume: bool,
+          overwrite: bool, reduce: str | None, checkpoint_every: int | None,
+          progress: bool) -> None:
+    """Train DDPG agents; run under `mpiexec -n N` for N parallel agents (the paper: 32)."""
+    from dlo_course import mpi
+    from dlo_course.trainer import preset, train as run_training
+
+    base = preset(preset_name)
+    # A different environment does not take the rod's arguments (n_nodes...).
+    env_kwargs = dict(base.env_kwargs) if env_id in (None, base.env_id) else {}
+    if nodes is not None:
+        env_kwargs["n_nodes"] = nodes
+    overrides = {name: value for name, value in [
+        ("env_id", env_id), ("episodes", episodes), ("steps_per_episode", steps_per_episode),
+        ("reduce", reduce), ("checkpoint_every", checkpoint_every)] if value is not None}
+    if out is None:
+        nodes_part = f"_n{env_kwargs['n_nodes']}" if "n_nodes" in env_kwargs else ""
+        out = Path("runs") / f"{preset_name}_{env_id or base.env_id}{nodes_part}_seed{seed}"
+    try:
+        config = preset(preset_name, env_kwargs=env_kwargs, seed=seed, out_dir=str(out),
+                        **overrides)
+        run_dir = run_training(config, resume=resume, progress=progress, overwrite=overwrite)
+    except (ValueError, FileExistsError) as err:
+        raise click.ClickException(str(err)) from err
+    if mpi.is_root():
+        click.echo(f"trained {mpi.size()} agent(s); results in {run_dir}")
+
+
+@main.command()
+@click.argument("run_dirs", nargs=-1, required=True,
+                type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              default=Path("reports/learning_curves.png"), show_default=True)
+@click.option("--label", "labels", multiple=True,
+              help="Legend label, once per run directory, in order [from each run's config].")
+def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...]) -> None:
+    """Learning curves of training runs, like the paper's Fig. 4."""
+    from dlo_course.learning_curves import plot_learning_curves
+
+    try:
+        plot_learning_curves(run_dirs, out=out, labels=labels or None)
+    except (ValueError, FileNotFoundError) as err:
+        raise click.ClickException(str(err)) from err
+    click.echo(f"wrote {out}")
+
+
+# --- evaluation and reproduction ---
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,213 @@
+"""``DLOShape-v0``: the paper's task as a Gymnasium environment (Sections IV-E and V).
+
+A Panda holds the top of a soft rod whose bottom is fixed to the ground. Each episode draws a
+goal: desired positions P_d of m selected mesh nodes (m = 2, 4 or 6), taken from a deformation
+database. The agent commands the tip's Cartesian velocity; it succeeds when the mean distance
+between the current node positions P_c and P_d falls below a threshold.
+
+Observation (float32, size 6 + 6m: 18 / 30 / 42), the paper's eq. (4)::
+
+    [ tip position (3) | tip velocity (3) | P_c (3m) | P_d (3m) ]
+
+Action: Box(-1, 1, (3,)), the tip velocity as a fraction of v_max = 1 m/s. It is integrated
+over 0.06 s into a tip target, clipped to the tip workspace box, and reached through the
+Panda's inverse kinematics with the tip orientation held. Out-of-range actions are clipped;
+non-finite actions raise ``ValueError``.
+
+Reward, the paper's eq. (5): ``r = -mean_i ||P_c,i - P_d,i||`` (metres).
+``terminated`` when that mean distance is below ``threshold``.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from dlo_course.mesh import selected_nodes
+from dlo_course.simulation import RodScene, SimParams
+
+
+class DLOShapeEnv(gym.Env):
+    """Shape control of a deformable linear object by a Panda (see the module docstring).
+
+    Args:
+        n_nodes: number of selected nodes, 2, 4 or 6 (the paper's three trainings).
+        goals: "small" or "large" (the paper's deformation databases), or an array of shape
+            (K, n_nodes, 3) of desired node positions in metres, world frame.
+        threshold: success distance (m); the paper trains at 0.05 and tests at 0.05 and 0.03.
+        max_episode_steps: truncate after this many actions. ``gymnasium.make`` applies its
+            own limit (300 for ``DLOShape-v0``, the paper's training episode); pass it there.
+        render_mode: None, "rgb_array" (an image of robot and rod, P_c blue and P_d red
+            crosses) or "human" (PyBullet's GUI; needs a display).
+        time_mode: "code" (3 ms of physics per action, the authors' code, default) or
+            "paper" (0.06 s per action, 20 times slower); overrides ``params.time_mode``.
+        params: all physical and timing parameters (:class:`SimParams`); paper defaults.
+
+    Reset options:
+        ``{"reinitialize": True}`` (default) rebuilds the initial scene;
+        ``{"reinitialize": False}`` keeps the rod's current shape and only draws a new goal
+        (the paper's test "without reinitialization"). ``{"goal_index": i}`` picks goal i
+        instead of drawing one.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        n_nodes: int = 4,
+        goals: str | np.ndarray = "small",
+        threshold: float = 0.05,
+        max_episode_steps: int | None = None,
+        render_mode: str | None = None,
+        time_mode: str | None = None,
+        params: SimParams | None = None,
+    ) -> None:
+        super().__init__()
+        self.node_ids = np.array(selected_nodes(n_nodes))
+        self.n_nodes = n_nodes
+        if not (np.isfinite(threshold) and threshold > 0):
+            raise ValueError(f"threshold must be a positive distance in metres, got {threshold}")
+        self.threshold = float(threshold)
+        if max_episode_steps is not None and max_episode_steps < 1:
+            raise ValueError(f"max_episode_steps must be >= 1, got {max_episode_steps}")
+        self.max_episode_steps = max_episode_steps
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
+        self.render_mode = render_mode
+        params = params or SimParams()
+        if time_mode is not None:
+            params = params.with_(time_mode=time_mode)
+        self.params = params
+        self.goal_set = self._load_goals(goals, n_nodes)
+
+        # Generous finite bounds: positions within 10 m of the origin, tip speed below
+        # 100 m/s. Observations are clipped to them, so they always lie in the space.
+        bound = np.full(6 + 6 * n_nodes, 10.0, dtype=np.float32)
+        bound[3:6] = 100.0
+        self.observation_space = spaces.Box(-bound, bound, dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+
+        self.scene = RodScene(params, gui=render_mode == "human")
+        self.goal_index = -1
+        self.goal = np.zeros((n_nodes, 3))
+        self._steps = 0
+        self._last_obs: np.ndarray | None = None  # last sane observation, None before reset
+        self._last_distance = np.nan
+        self._fresh = True  # the scene is in its initial configuration, untouched
+        self._broken = False  # the simulation blew up; only a rebuild recovers
+
+    # ------------------------------------------------------------------ goals
+    @staticmethod
+    def _load_goals(goals: str | np.ndarray, n_nodes: int) -> np.ndarray:
+        if isinstance(goals, str):
+            from dlo_course.database import load_database
+
+            return load_database(goals).goals(n_nodes)
+        array = np.asarray(goals, dtype=np.float64)
+        if array.ndim == 2 and array.shape == (n_nodes, 3):
+            array = array[None]  # a single goal
+        if array.ndim != 3 or array.shape[1:] != (n_nodes, 3) or len(array) == 0:
+            raise ValueError(f"goals must have shape (K, {n_nodes}, 3) for n_nodes={n_nodes}, "
+                             f"got {array.shape}")
+        if not np.all(np.isfinite(array)):
+            raise ValueError("goals must be finite")
+        return array
+
+    # -------------------------------------------------------------- gym API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"reinitialize", "goal_index"}
+        if unknown:
+            raise ValueError(f"unknown reset options {sorted(unknown)}; "
+                             "use 'reinitialize' and/or 'goal_index'")
+        if options.get("reinitialize", True) or self._last_obs is None or self._broken:
+            if not self._fresh:
+                self.scene.build()
+            self._broken = False
+        self._fresh = False
+        if "goal_index" in options:
+            index = int(options["goal_index"])
+            if not 0 <= index < len(self.goal_set):
+                raise ValueError(f"goal_index {index} out of range 0..{len(self.goal_set) - 1}")
+        else:
+            index = int(self.np_random.integers(len(self.goal_set)))
+        self.goal_index = index
+        self.goal = self.goal_set[index]
+        self._steps = 0
+        nodes = self.scene.node_positions()
+        obs, distance = self._observe(nodes)
+        self._last_obs, self._last_distance = obs, distance
+        return obs, self._info(distance, unstable=False)
+
+    def step(self, action):
+        action = np.asarray(action, dtype=np.float64).reshape(-1)
+        if action.shape != (3,):
+            raise ValueError(f"action must have 3 components (tip velocity), got {action.shape}")
+        if not np.all(np.isfinite(action)):
+            raise ValueError(f"action must be finite, got {action}")
+        if self._last_obs is None:
+            raise RuntimeError("call reset() before step()")
+        if self._broken:
+            raise RuntimeError("the simulation blew up in this episode; call reset()")
+        action = np.clip(action, -1.0, 1.0)
+
+        t = time.perf_counter()
+        target = self.scene.tip_target(action)
+        self.scene.timings.other += time.perf_counter() - t
+        self.scene.move_tip_to(target)
+        self._steps += 1
+
+        nodes = self.scene.node_positions()
+        if self.scene.is_unstable(nodes):
+            # The agent never sees a NaN: it gets the last sane observation, the episode is
+            # cut, and info says why. The next reset rebuilds the scene.
+            self._broken = True
+            info = self._info(self._last_distance, unstable=True)
+            return self._last_obs.copy(), -self._last_distance, False, True, info
+
+        obs, distance = self._observe(nodes)
+        self._last_obs, self._last_distance = obs, distance
+        terminated = bool(distance < self.threshold)
+        truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
+        return obs, -distance, terminated, bool(truncated), self._info(distance, False)
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None  # "human": the GUI draws itself
+        nodes = self.scene.node_positions()
+        return self.scene.render(markers=((nodes[self.node_ids], (40, 80, 255)),
+                                          (self.goal, (230, 30, 30))))
+
+    def close(self) -> None:
+        self.scene.close()
+
+    # -------------------------------------------------------------- helpers
+    def _observe(self, nodes: np.ndarray) -> tuple[np.ndarray, float]:
+        t = time.perf_counter()
+        tip, velocity = self.scene.tip_state()
+        current = nodes[self.node_ids]
+        distance = mean_node_distance(current, self.goal)
+        obs = np.concatenate([tip, velocity, current.ravel(), self.goal.ravel()])
+        obs = np.clip(obs, self.observation_space.low, self.observation_space.high,
+                      dtype=np.float32)
+        self.scene.timings.observation += time.perf_counter() - t
+        return obs, distance
+
+    def _info(self, distance: float, unstable: bool) -> dict[str, Any]:
+        return {
+            "distance": float(distance),
+            "is_success": bool(distance < self.threshold) and not unstable,
+            "tip_position": self.scene.tip_position(),
+            "goal_index": self.goal_index,
+            "simulation_unstable": unstable,
+        }
+
+
+def mean_node_distance(current: np.ndarray, desired: np.ndarray) -> float:
+    """Mean Euclidean distance (m) between node positions P_c and P_d, both (m, 3)."""
+    return float(np.mean(np.linalg.norm(np.asarray(current) - np.asarray(desired), axis=-1)))

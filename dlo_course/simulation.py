@@ -1,0 +1,429 @@
+"""The PyBullet scene of the paper: a Franka Panda holding a soft FEM rod (Section V-C).
+
+Everything physical lives here; :mod:`dlo_course.env` wraps it as a Gymnasium environment and
+:mod:`dlo_course.database` sweeps it to record goal shapes. Each :class:`RodScene` owns its own
+PyBullet physics client, so several scenes (and environments) can live in one process.
+
+Time per action, the one place where the paper's text and the authors' code disagree:
+
+* ``time_mode="code"`` (default): the authors' code sets a 0.003 s time step split into 20
+  sub-steps and calls ``stepSimulation()`` once per action, so one action advances only 3 ms
+  of physics (20 sub-steps of 0.15 ms). The published numbers come from this setting.
+* ``time_mode="paper"``: the text says an action is integrated over 20 x 0.003 = 0.06 s. We run
+  ``stepSimulation()`` 20 times per action with the same stable 0.15 ms sub-step, so one action
+  costs 20 times as much compute. (A single 0.06 s step with larger sub-steps is not an
+  option: PyBullet integrates the Neo-Hookean elastic forces explicitly, and at E = 2.5 MPa
+  sub-steps above about 0.3 ms explode.)
+
+In both modes the *commanded* tip displacement per action is the same, a * v_max * 0.06 s;
+only the physics time the rod gets to follow it differs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+
+_LIBC = ctypes.CDLL(None)
+
+
+@contextlib.contextmanager
+def quiet_c_stdout():
+    """Silence what C code prints to file descriptor 1 (PyBullet's banners and mesh counts),
+    which would otherwise break progress bars and clutter notebooks."""
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+    except (OSError, ValueError):  # no real stdout (some notebook or IDE consoles)
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 1)
+            yield
+    finally:
+        _LIBC.fflush(None)  # C's own buffer would otherwise be written out later
+        os.dup2(saved, 1)
+        os.close(saved)
+
+
+with quiet_c_stdout():
+    import pybullet as p
+    import pybullet_data
+
+from dlo_course.mesh import make_rod_mesh, write_vtk
+from dlo_course.paths import MESH_PATH
+
+TimeMode = Literal["code", "paper"]
+
+
+def lame_parameters(youngs_modulus: float, poisson_ratio: float) -> tuple[float, float]:
+    """Neo-Hookean parameters (mu, lambda) in Pa from Young's modulus E and Poisson's ratio nu.
+
+    mu = E / (2 (1 + nu)) is the shear modulus; lambda = E nu / ((1 + nu)(1 - 2 nu)) is Lamé's
+    first parameter. For the paper's E = 2.5 MPa, nu = 0.3: mu = 961 538 Pa,
+    lambda = 1 442 308 Pa.
+    """
+    if youngs_modulus <= 0:
+        raise ValueError(f"Young's modulus must be positive, got {youngs_modulus}")
+    if not -1.0 < poisson_ratio < 0.5:
+        raise ValueError(f"Poisson's ratio must be in (-1, 0.5), got {poisson_ratio}")
+    mu = youngs_modulus / (2.0 * (1.0 + poisson_ratio))
+    lam = youngs_modulus * poisson_ratio / ((1.0 + poisson_ratio) * (1.0 - 2.0 * poisson_ratio))
+    return mu, lam
+
+
+@dataclass(frozen=True)
+class SimParams:
+    """Every physical and timing parameter of the scene. Defaults are the paper's values."""
+
+    # --- the soft object (paper Section V-C) ---
+    length: float = 1.55
+    """Rod length (m)."""
+    radius: float = 0.025
+    """Rod radius (m)."""
+    youngs_modulus: float = 2.5e6
+    """Young's modulus E (Pa); with nu it gives the Neo-Hookean mu and lambda."""
+    poisson_ratio: float = 0.3
+    """Poisson's ratio nu."""
+    mass: float = 0.2
+    """Total mass of the rod (kg)."""
+    damping: float = 0.01
+    """PyBullet's Neo-Hookean damping (the paper's "damping ratio")."""
+    friction: float = 0.5
+    """Friction coefficient of the rod."""
+    collision_margin: float = 0.001
+    """Collision margin of the rod (m), as in the authors' code."""
+    self_collision: bool = True
+    """Rod self-collision, as in the authors' code."""
+    mesh_path: Path | None = None
+    """Legacy VTK mesh. None: ``data/rod.vtk`` for the paper's rod (written on first use if
+    missing), or a mesh generated for a non-default ``length`` / ``radius``."""
+
+    # --- the robot and the scene (authors' code) ---
+    panda_base: tuple[float, float, float] = (0.7, 0.0, 1.435)
+    """Panda base position (m); the robot stands on a table."""
+    initial_joints: tuple[float, ...] = (0.0, 0.287, 0.0, -2.392, 0.0, 2.646, -0.799)
+    """Initial joint angles (rad) of the 7 arm joints; the tip starts near (1.198, 0, 1.631)."""
+    tip_link: int = 7
+    """Panda link whose origin is the controlled tip (link 7, the flange)."""
+    joint_force: float = 2400.0
+    """Maximum motor force of the position controllers (N m), as in the authors' code."""
+    gravity: float = -9.81
+    """Gravity along z (m/s^2)."""
+
+    # --- actions ---
+    v_max: float = 1.0
+    """Tip speed (m/s) of an action component of 1."""
+    action_duration: float = 0.06
+    """Integration time of an action (s): target = tip + a * v_max * action_duration."""
+    workspace_low: tuple[float, float, float] = (-0.2, -0.5, -0.3)
+    """Lower corner of the tip workspace, as an offset from the initial tip (m)."""
+    workspace_high: tuple[float, float, float] = (0.1, 0.5, 0.0)
+    """Upper corner of the tip workspace, as an offset from the initial tip (m)."""
+
+    # --- time ---
+    time_mode: TimeMode = "code"
+    """"code": 3 ms of physics per action (published numbers); "paper": 0.06 s per action."""
+    time_step: float = 0.003
+    """PyBullet time step of one ``stepSimulation()`` call (s)."""
+    sub_steps: int = 20
+    """Sub-steps per ``stepSimulation()`` call: 0.003 s / 20 = 0.15 ms, a stable sub-step."""
+
+    # --- safety ---
+    max_node_distance: float = 5.0
+    """A node farther than this from the tip (m) means the simulation has blown up."""
+
+    def __post_init__(self) -> None:
+        if self.time_mode not in ("code", "paper"):
+            raise ValueError(f"time_mode must be 'code' or 'paper', got {self.time_mode!r}")
+        for name in ("length", "radius", "mass", "time_step", "v_max", "action_duration"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
+        if self.sub_steps < 1:
+            raise ValueError(f"sub_steps must be >= 1, got {self.sub_steps}")
+        if len(self.initial_joints) != 7:
+            raise ValueError("initial_joints needs the 7 arm joint angles")
+        lame_parameters(self.youngs_modulus, self.poisson_ratio)  # validates E and nu
+
+    @property
+    def steps_per_action(self) -> int:
+        """``stepSimulation()`` calls per action: 1 ("code") or 0.06 / 0.003 = 20 ("paper")."""
+        if self.time_mode == "code":
+            return 1
+        return max(1, round(self.action_duration / self.time_step))
+
+    @property
+    def physics_time_per_action(self) -> float:
+        """Seconds of simulated physics per action: 0.003 ("code") or 0.06 ("paper")."""
+        return self.steps_per_action * self.time_step
+
+    @property
+    def lame(self) -> tuple[float, float]:
+        """(mu, lambda) of the Neo-Hookean material, in Pa."""
+        return lame_parameters(self.youngs_modulus, self.poisson_ratio)
+
+    def with_(self, **changes) -> "SimParams":
+        """A copy with some fields changed (the dataclass is frozen)."""
+        return replace(self, **changes)
+
+
+@dataclass
+class StepTimings:
+    """Wall-clock seconds spent in each part of the actions taken so far (for benchmarks)."""
+
+    physics: float = 0.0
+    ik: float = 0.0
+    read_nodes: float = 0.0
+    observation: float = 0.0
+    other: float = 0.0
+    actions: int = 0
+
+    def reset(self) -> None:
+        self.physics = self.ik = self.read_nodes = self.observation = self.other = 0.0
+        self.actions = 0
+
+
+class RodScene:
+    """One PyBullet world: plane, Panda, rod anchored to the ground and to the flange.
+
+    Args:
+        params: physical and timing parameters.
+        gui: open PyBullet's GUI instead of the headless ``DIRECT`` client.
+    """
+
+    ARM_JOINTS = tuple(range(7))
+    GRIPPER_LINKS = (7, 8, 9, 10, 11)  # flange, hand, fingers, grasp frame
+
+    def __init__(self, params: SimParams | None = None, gui: bool = False) -> None:
+        self.params = params or SimParams()
+        self.gui = gui
+        self.mesh_path = ensure_mesh(self.params)
+        with quiet_c_stdout():  # the first connection prints PyBullet's build time
+            self.client = p.connect(p.GUI if gui else p.DIRECT)
+        if self.client < 0:
+            raise RuntimeError("could not connect to PyBullet (a GUI needs a display)")
+        self.timings = StepTimings()
+        self.plane = self.panda = self.rod = -1
+        self.initial_tip = np.zeros(3)
+        self.tip_orientation = (0.0, 0.0, 0.0, 1.0)
+        self._ik_limits: dict = {}
+        self.build()
+
+    # ------------------------------------------------------------------ world
+    def build(self) -> None:
+        """(Re)create the world in its initial configuration.
+
+        Rebuilding from scratch, rather than restoring a saved state, is the only way PyBullet
+        offers to reset a deformable body exactly, and it makes resets deterministic.
+        """
+        c, prm = self.client, self.params
+        p.resetSimulation(p.RESET_USE_DEFORMABLE_WORLD, physicsClientId=c)
+        p.setGravity(0, 0, prm.gravity, physicsClientId=c)
+        p.setTimeStep(prm.time_step, physicsClientId=c)
+        p.setPhysicsEngineParameter(numSubSteps=prm.sub_steps, physicsClientId=c)
+        data = pybullet_data.getDataPath()
+        self.plane = p.loadURDF(str(Path(data) / "plane.urdf"), physicsClientId=c)
+        self.panda = p.loadURDF(str(Path(data) / "franka_panda" / "panda.urdf"),
+                                list(prm.panda_base), useFixedBase=True, physicsClientId=c)
+        for j, q in zip(self.ARM_JOINTS, prm.initial_joints):
+            p.resetJointState(self.panda, j, q, physicsClientId=c)
+        state = p.getLinkState(self.panda, prm.tip_link, computeForwardKinematics=True,
+                               physicsClientId=c)
+        self.initial_tip = np.array(state[4], dtype=np.float64)
+        self.tip_orientation = state[5]
+        self._set_arm_targets(prm.initial_joints)
+
+        mu, lam = prm.lame
+        with quiet_c_stdout():  # loadSoftBody prints the mesh's counts
+            self.rod = p.loadSoftBody(
+                str(self.mesh_path),
+                basePosition=[self.initial_tip[0], self.initial_tip[1], 0.0],
+                scale=1.0, mass=prm.mass, useNeoHookean=1, NeoHookeanMu=mu,
+                NeoHookeanLambda=lam, NeoHookeanDamping=prm.damping,
+                useSelfCollision=int(prm.self_collision), frictionCoeff=prm.friction,
+                collisionMargin=prm.collision_margin, physicsClientId=c)
+        p.changeVisualShape(self.rod, -1, rgbaColor=[0.2, 0.75, 0.3, 1.0], physicsClientId=c)
+        # A pedestal for the robot, for the pictures only: no collision shape, no mass.
+        height = prm.panda_base[2]
+        pedestal = p.createVisualShape(p.GEOM_BOX, halfExtents=[0.15, 0.15, height / 2],
+                                       rgbaColor=[0.55, 0.45, 0.35, 1.0], physicsClientId=c)
+        p.createMultiBody(0.0, -1, pedestal, [prm.panda_base[0], prm.panda_base[1], height / 2],
+                          physicsClientId=c)
+        # Node 0 (bottom centre) is fixed to the ground; node 1 (top centre) to the flange.
+        p.createSoftBodyAnchor(self.rod, 0, -1, -1, physicsClientId=c)
+        p.createSoftBodyAnchor(self.rod, 1, self.panda, prm.tip_link, physicsClientId=c)
+        # The anchor is the grasp. The hand and fingers overlap the rod's top; left colliding,
+        # they push its top rings sideways by several centimetres within 0.1 s.
+        for link in self.GRIPPER_LINKS:
+            p.setCollisionFilterPair(self.panda, self.rod, link, -1, 0, physicsClientId=c)
+        # Likewise the anchor is the ground fixation. The bottom ring lies on the plane, and
+        # that contact made the simulation explode on the second move of the database sweep.
+        p.setCollisionFilterPair(self.plane, self.rod, -1, -1, 0, physicsClientId=c)
+
+        lower, upper, ranges = [], [], []
+        for j in range(p.getNumJoints(self.panda, physicsClientId=c)):
+            info = p.getJointInfo(self.panda, j, physicsClientId=c)
+            if info[2] != p.JOINT_FIXED:
+                lower.append(info[8])
+                upper.append(info[9])
+                ranges.append(info[9] - info[8])
+        rest = list(prm.initial_joints) + [0.0] * (len(lower) - 7)
+        # Null-space IK pulls the redundant arm towards its initial posture, so the same tip
+        # path always gives the same arm motion instead of drifting through the null space.
+        self._ik_limits = dict(lowerLimits=lower, upperLimits=upper, jointRanges=ranges,
+                               restPoses=rest)
+        self.timings.reset()
+
+    def close(self) -> None:
+        if self.client >= 0:
+            try:
+                p.disconnect(physicsClientId=self.client)
+            except p.error:
+                pass
+            self.client = -1
+
+    # ---------------------------------------------------------------- reading
+    def tip_position(self) -> np.ndarray:
+        """(3,) world position of the tip (flange origin), m."""
+        return np.array(p.getLinkState(self.panda, self.params.tip_link,
+                                       computeForwardKinematics=True,
+                                       physicsClientId=self.client)[4])
+
+    def tip_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """Tip position (3,) in m and linear velocity (3,) in m/s."""
+        state = p.getLinkState(self.panda, self.params.tip_link, computeLinkVelocity=1,
+                               computeForwardKinematics=True, physicsClientId=self.client)
+        return np.array(state[4]), np.array(state[6])
+
+    def node_positions(self) -> np.ndarray:
+        """(200, 3) world positions of all mesh nodes, m, in the mesh file's order."""
+        t = time.perf_counter()
+        _, vertices = p.getMeshData(self.rod, -1, flags=p.MESH_DATA_SIMULATION_MESH,
+                                    physicsClientId=self.client)
+        nodes = np.asarray(vertices, dtype=np.float64)
+        self.timings.read_nodes += time.perf_counter() - t
+        return nodes
+
+    def is_unstable(self, nodes: np.ndarray) -> bool:
+        """True when node positions are non-finite or absurdly far from the tip."""
+        if not np.all(np.isfinite(nodes)):
+            return True
+        tip = self.tip_position()
+        return bool(np.max(np.linalg.norm(nodes - tip, axis=1)) > self.params.max_node_distance
+                    or np.min(nodes[:, 2]) < -1.0)
+
+    # ----------------------------------------------------------------- acting
+    @property
+    def workspace(self) -> tuple[np.ndarray, np.ndarray]:
+        """World-frame (low, high) corners of the tip workspace box."""
+        return (self.initial_tip + np.asarray(self.params.workspace_low),
+                self.initial_tip + np.asarray(self.params.workspace_high))
+
+    def tip_target(self, action: np.ndarray) -> np.ndarray:
+        """Integrate a velocity action over ``action_duration``; clip to the tip workspace."""
+        prm = self.params
+        target = self.tip_position() + np.asarray(action) * prm.v_max * prm.action_duration
+        low, high = self.workspace
+        return np.clip(target, low, high)
+
+    def move_tip_to(self, target: np.ndarray) -> None:
+        """Command the tip to ``target`` (3,) by IK, keep its orientation, advance one action."""
+        t = time.perf_counter()
+        joints = p.calculateInverseKinematics(
+            self.panda, self.params.tip_link, list(target), self.tip_orientation,
+            maxNumIterations=50, residualThreshold=1e-5, physicsClientId=self.client,
+            **self._ik_limits)
+        self._set_arm_targets(joints[:7])
+        self.timings.ik += time.perf_counter() - t
+        self.advance()
+
+    def advance(self) -> None:
+        """Advance the physics by one action's worth of time, motors holding their targets."""
+        t = time.perf_counter()
+        for _ in range(self.params.steps_per_action):
+            p.stepSimulation(physicsClientId=self.client)
+        self.timings.physics += time.perf_counter() - t
+        self.timings.actions += 1
+
+    def _set_arm_targets(self, joints) -> None:
+        p.setJointMotorControlArray(
+            self.panda, list(self.ARM_JOINTS), p.POSITION_CONTROL,
+            targetPositions=list(joints), forces=[self.params.joint_force] * 7,
+            physicsClientId=self.client)
+
+    # -------------------------------------------------------------- rendering
+    def render(self, width: int = 480, height: int = 360,
+               markers: tuple[tuple[np.ndarray, tuple[int, int, int]], ...] = ()) -> np.ndarray:
+        """An RGB image (height, width, 3) uint8 of the scene from a fixed camera.
+
+        ``markers`` are (points (K, 3), colour) pairs drawn as crosses *on the image*: the
+        world is never touched and the physics never stepped, so rendering cannot change a run
+        (the authors' GUI drawing did step the simulation).
+        """
+        target = [self.initial_tip[0] - 0.2, 0.0, 0.95]
+        view = p.computeViewMatrixFromYawPitchRoll(
+            cameraTargetPosition=target, distance=2.9, yaw=50, pitch=-15, roll=0,
+            upAxisIndex=2, physicsClientId=self.client)
+        proj = p.computeProjectionMatrixFOV(fov=50, aspect=width / height, nearVal=0.05,
+                                            farVal=10.0, physicsClientId=self.client)
+        _, _, rgba, _, _ = p.getCameraImage(
+            width, height, viewMatrix=view, projectionMatrix=proj,
+            renderer=p.ER_TINY_RENDERER, physicsClientId=self.client)
+        image = np.asarray(rgba, dtype=np.uint8).reshape(height, width, 4)[:, :, :3].copy()
+        for points, colour in markers:
+            _draw_crosses(image, _project(np.asarray(points), view, proj, width, height), colour)
+        return image
+
+
+def _project(points: np.ndarray, view, proj, width: int, height: int) -> np.ndarray:
+    """Pixel coordinates (K, 2) of world points (K, 3) through PyBullet's camera matrices."""
+    v = np.asarray(view).reshape(4, 4, order="F")
+    pr = np.asarray(proj).reshape(4, 4, order="F")
+    homogeneous = np.c_[points, np.ones(len(points))] @ (pr @ v).T
+    ndc = homogeneous[:, :3] / homogeneous[:, 3:4]
+    x = (ndc[:, 0] + 1) / 2 * width
+    y = (1 - ndc[:, 1]) / 2 * height
+    return np.c_[x, y]
+
+
+def _draw_crosses(image: np.ndarray, pixels: np.ndarray, colour, size: int = 6) -> None:
+    h, w = image.shape[:2]
+    for x, y in np.round(pixels).astype(int):
+        for d in range(-size, size + 1):
+            for dx, dy in ((d, d), (d, -d)):
+                for t in (0, 1):  # two pixels thick
+                    px, py = x + dx + t, y + dy
+                    if 0 <= px < w and 0 <= py < h:
+                        image[py, px] = colour
+
+
+def ensure_mesh(params: SimParams) -> Path:
+    """The mesh file for ``params``, written first if it is missing.
+
+    The mesh is a pure function of (length, radius), so a missing file is regenerated rather
+    than treated as an error; a rod of another size gets its own file in the temp folder.
+    """
+    if params.mesh_path is not None:
+        path = Path(params.mesh_path)
+        if not path.is_file():
+            raise FileNotFoundError(f"no mesh file at {path}")
+        return path
+    default = SimParams.__dataclass_fields__
+    if (params.length, params.radius) == (default["length"].default, default["radius"].default):
+        path = MESH_PATH
+    else:
+        path = Path(tempfile.gettempdir()) / f"dlo_rod_{params.length:g}_{params.radius:g}.vtk"
+    if not path.is_file():
+        write_vtk(make_rod_mesh(params.length, params.radius), path)
+    return path
