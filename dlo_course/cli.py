@@ -64,6 +64,24 @@ def plot_boxes(out: Path) -> None:
     click.echo(f"wrote {out}")
 
 
+@main.command()
+@click.option("--nodes", "n_nodes", type=click.Choice(["2", "4", "6"]), default="4",
+              show_default=True, help="Number of selected mesh nodes.")
+@click.option("--goals", type=click.Choice(["small", "large"]), default="small",
+              show_default=True, help="Deformation database the goal is drawn from.")
+@click.option("--steps", type=click.IntRange(1, 10_000), default=30, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              default=Path("reports/demo.png"), show_default=True,
+              help="PNG of the first and last frames; a GIF of the episode is written beside it.")
+def demo(n_nodes: str, goals: str, steps: int, seed: int, out: Path) -> None:
+    """Run one episode with random actions and save pictures of it."""
+    from dlo_course.demo import run_demo
+
+    summary = run_demo(n_nodes=int(n_nodes), goals=goals, steps=steps, seed=seed, out=out)
+    click.echo(summary)
+
+
 @main.group()
 def bench() -> None:
     """Speed measurements (benchmarks, not tests)."""
