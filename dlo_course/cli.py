@@ -176,6 +176,56 @@ def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...]) -> None
 
 
 # --- evaluation and reproduction ---
+@main.command()
+@click.option("--checkpoint", type=click.Path(path_type=Path), required=True,
+              help="Run directory holding actor.pt (or the actor.pt file).")
+@click.option("--database", "goals", default="small", show_default=True,
+              help="Goals: 'small', 'large', a database .npz, or a .npy array (K, nodes, 3).")
+@click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=0.05,
+              show_default=True, help="Success distance (m).")
+@click.option("--no-reinit", is_flag=True,
+              help="Start each episode from the shape the previous one ended in.")
+@click.option("--episodes", type=click.IntRange(min=1), default=1000, show_default=True)
+@click.option("--max-steps", type=click.IntRange(min=1), default=30, show_default=True)
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of the goal draw.")
+@click.option("--nodes", "n_nodes", type=click.Choice(["2", "4", "6"]), default=None,
+              help="Nodes the checkpoint must have been trained for (default: inferred).")
+@click.option("--time-mode", type=click.Choice(["code", "paper"]), default="code",
+              show_default=True)
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Write the summary and every episode as JSON.")
+def evaluate(checkpoint: Path, goals: str, threshold: float, no_reinit: bool, episodes: int,
+             max_steps: int, seed: int, n_nodes: str | None, time_mode: str,
+             out: Path | None) -> None:
+    """The paper's test protocol (Table I) for one checkpoint; parallel under mpiexec."""
+    import json
+    from dataclasses import asdict
+
+    from dlo_course.evaluation import CheckpointError, evaluate as run
+
+    try:
+        summary, records = run(checkpoint, goals=goals, threshold=threshold,
+                               reinitialize=not no_reinit, episodes=episodes,
+                               max_steps=max_steps, seed=seed,
+                               n_nodes=None if n_nodes is None else int(n_nodes),
+                               time_mode=time_mode)
+    except (CheckpointError, FileNotFoundError, ValueError) as err:
+        raise click.ClickException(str(err)) from None
+    if summary is None:  # not rank 0
+        return
+    s = summary
+    click.echo(f"{'with' if not no_reinit else 'without'} reinitialization, {goals} goals, "
+               f"threshold {threshold} m, {s.episodes} episodes of at most {max_steps} steps")
+    click.echo(f"done {s.done_percent:.1f}% (95% CI {s.done_ci_low:.1f}-{s.done_ci_high:.1f}), "
+               f"final distance {s.mean_distance:.5f} +- {s.std_distance:.5f} m, "
+               f"best {s.best_distance:.5f} m")
+    if out is not None:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(json.dumps({"summary": s.as_dict(),
+                                   "episodes": [asdict(r) for r in records]}, indent=1))
+        click.echo(f"wrote {out}")
+
 
 
 if __name__ == "__main__":

@@ -1,0 +1,261 @@
+"""The paper's test protocol (Section VI, Table I), in parallel over MPI ranks.
+
+A trained actor is run without exploration noise for a number of test episodes of at most 30
+actions each, stopped when the mean node distance falls below the threshold. For each setting
+Table I reports:
+
+* done %: the share of episodes that reached the threshold;
+* mean ± σ and best of the *final* mean node distance (m) over the episodes.
+
+We add a 95% confidence interval for done % (Wilson's score interval), which the paper does not
+give: with 1000 episodes and 99% done it is about ±0.7 points, with 100 episodes about ±3.
+
+Two ways to start an episode:
+
+* with reinitialisation: the world is rebuilt before every episode;
+* without: every episode starts from the shape the previous one ended in.
+
+Episode ``i`` always gets goal ``goal_indices[i]``, drawn once from the seed. With
+reinitialisation every episode is then independent, so any split of the episodes over MPI
+ranks gives exactly the result of one process. Without, each rank runs its own chain of
+episodes (rank r takes episodes r, r + N, r + 2N, ...), so the result depends on the number of
+ranks as well as on the seed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+CHECKPOINT_FILE = "actor.pt"
+
+
+# ------------------------------------------------------------------------------ statistics
+@dataclass(frozen=True)
+class EpisodeRecord:
+    """The outcome of one test episode."""
+
+    episode: int
+    goal_index: int
+    done: bool
+    """The mean node distance went below the threshold."""
+    final_distance: float
+    """Mean node distance (m) when the episode stopped."""
+    steps: int
+    start_distance: float
+
+
+def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson score interval for a binomial proportion (default 95%), as fractions in [0, 1].
+
+    Unlike the normal approximation it stays inside [0, 1] and behaves at 0% and 100%.
+    """
+    if n <= 0:
+        raise ValueError("the interval needs at least one episode")
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes must be within 0..{n}, got {successes}")
+    p = successes / n
+    denominator = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / denominator
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+@dataclass(frozen=True)
+class Summary:
+    """One row of Table I."""
+
+    episodes: int
+    done_percent: float
+    done_ci_low: float
+    """Lower end of the 95% Wilson interval of done %."""
+    done_ci_high: float
+    mean_distance: float
+    std_distance: float
+    """Population standard deviation (ddof = 0) of the final distances."""
+    best_distance: float
+    mean_steps: float
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def summarize(records: Sequence[EpisodeRecord]) -> Summary:
+    """Table I's statistics over test episodes (see the module docstring)."""
+    if len(records) == 0:
+        raise ValueError("no episodes to summarise")
+    done = np.array([r.done for r in records], dtype=bool)
+    final = np.array([r.final_distance for r in records], dtype=np.float64)
+    low, high = wilson_interval(int(done.sum()), len(records))
+    return Summary(
+        episodes=len(records),
+        done_percent=100.0 * done.mean(),
+        done_ci_low=100.0 * low,
+        done_ci_high=100.0 * high,
+        mean_distance=float(final.mean()),
+        std_distance=float(final.std()),
+        best_distance=float(final.min()),
+        mean_steps=float(np.mean([r.steps for r in records])),
+    )
+
+
+# ------------------------------------------------------------------------------ checkpoints
+class CheckpointError(ValueError):
+    """A checkpoint is missing, unreadable, or does not fit the task it is evaluated on."""
+
+
+def load_actor(checkpoint: str | Path, n_nodes: int | None = None):
+    """Load the trained actor of ``checkpoint`` (a run directory or an ``actor.pt`` file).
+
+    Args:
+        n_nodes: when given, the actor must have been trained for that many nodes.
+
+    Returns:
+        (actor, n_nodes): the :class:`~dlo_course.ddpg.Actor` in eval mode and the number of
+        nodes its observation implies.
+
+    Raises:
+        CheckpointError: with a message that says what is wrong and what to do.
+    """
+    from dlo_course.ddpg import Actor, load_network
+
+    path = Path(checkpoint)
+    if path.is_dir():
+        path = path / CHECKPOINT_FILE
+    if not path.is_file():
+        raise CheckpointError(f"no checkpoint at {checkpoint}: expected a run directory with "
+                              f"{CHECKPOINT_FILE}, or the file itself (train one with "
+                              "`dlo-course train`)")
+    try:
+        actor = load_network(path)
+    except Exception as err:  # torch and pickle raise many kinds
+        raise CheckpointError(f"{path} is not a readable actor checkpoint "
+                              f"({type(err).__name__}: {err})") from err
+    if not isinstance(actor, Actor):
+        raise CheckpointError(f"{path} holds a {type(actor).__name__}, not an Actor")
+    obs_dim = actor.init_kwargs["obs_dim"]
+    act_dim = actor.init_kwargs["act_dim"]
+    trained_nodes = (obs_dim - 6) // 6
+    if act_dim != 3 or obs_dim != 6 + 6 * trained_nodes or trained_nodes not in (2, 4, 6):
+        raise CheckpointError(f"{path} was not trained on DLOShape-v0 (observation {obs_dim}, "
+                              f"action {act_dim}; the rod needs 18/30/42 and 3)")
+    if n_nodes is not None and n_nodes != trained_nodes:
+        raise CheckpointError(f"{path} was trained for {trained_nodes} nodes (observation "
+                              f"{obs_dim}) but is evaluated for {n_nodes} nodes (observation "
+                              f"{6 + 6 * n_nodes}); pass --nodes {trained_nodes} or another "
+                              "checkpoint")
+    actor.eval()
+    return actor, trained_nodes
+
+
+# ------------------------------------------------------------------------------ goals
+def load_goals(source: str | Path | np.ndarray, n_nodes: int) -> np.ndarray:
+    """Goal shapes (K, n_nodes, 3) from "small", "large", a database ``.npz``, a ``.npy``
+    array of shape (K, n_nodes, 3), or an ``.npz`` holding such an array as ``goals``."""
+    from dlo_course.database import load_database
+    from dlo_course.env import DLOShapeEnv
+
+    if isinstance(source, np.ndarray):
+        return DLOShapeEnv._load_goals(source, n_nodes)
+    path = Path(source)
+    if str(source) in ("small", "large"):
+        return load_database(str(source)).goals(n_nodes)
+    if path.suffix == ".npy":
+        if not path.is_file():
+            raise FileNotFoundError(f"no goal file at {path}")
+        return DLOShapeEnv._load_goals(np.load(path, allow_pickle=False), n_nodes)
+    if path.suffix == ".npz" and path.is_file():
+        with np.load(path, allow_pickle=False) as data:
+            if "goals" in data.files and "nodes" not in data.files:
+                return DLOShapeEnv._load_goals(data["goals"], n_nodes)
+    return load_database(path).goals(n_nodes)
+
+
+def goal_schedule(n_goals: int, episodes: int, seed: int) -> np.ndarray:
+    """(episodes,) goal index of every test episode, drawn uniformly from the seed."""
+    return np.random.default_rng(seed).integers(n_goals, size=episodes)
+
+
+# ------------------------------------------------------------------------------ protocol
+def run_episodes(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
+                 reinitialize: bool, max_steps: int, progress=None) -> list[EpisodeRecord]:
+    """Run the given test episodes in order on one environment (one chain of episodes).
+
+    Args:
+        actor: deterministic policy, a module mapping (1, obs_dim) tensors to (1, 3) actions.
+        env: a :class:`~dlo_course.env.DLOShapeEnv` built with the test goals and threshold.
+        episode_ids: global indices of the episodes this process runs.
+        goal_indices: goal index of every episode (global, see :func:`goal_schedule`).
+        reinitialize: rebuild the world before each episode, or continue from the last shape.
+        max_steps: at most this many actions per episode.
+        progress: an optional callable called once after each episode.
+    """
+    import torch
+
+    records = []
+    for i, episode in enumerate(episode_ids):
+        # The first episode of a chain starts from the initial configuration.
+        options = {"reinitialize": reinitialize or i == 0,
+                   "goal_index": int(goal_indices[episode])}
+        obs, info = env.reset(options=options)
+        start = info["distance"]
+        done, steps = False, 0
+        for steps in range(1, max_steps + 1):
+            with torch.no_grad():
+                action = actor(torch.as_tensor(obs[None]))[0].numpy()
+            obs, _, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                done = bool(terminated)
+                break
+        records.append(EpisodeRecord(int(episode), int(goal_indices[episode]), done,
+                                     float(info["distance"]), steps, float(start)))
+        if progress is not None:
+            progress()
+    return records
+
+
+def evaluate(checkpoint: str | Path, goals: str | Path | np.ndarray = "small",
+             threshold: float = 0.05, reinitialize: bool = True, episodes: int = 1000,
+             max_steps: int = 30, seed: int = 0, n_nodes: int | None = None,
+             time_mode: str = "code", show_progress: bool = True) -> tuple[Summary | None, list]:
+    """Table I's protocol for one checkpoint and setting; runs on every MPI rank.
+
+    Episodes are split over the ranks (see the module docstring); rank 0 gathers them.
+
+    Returns:
+        (summary, records) on rank 0, sorted by episode; (None, []) on the other ranks.
+    """
+    from tqdm.auto import tqdm
+
+    from dlo_course import mpi
+    from dlo_course.env import DLOShapeEnv
+
+    if episodes < 1:
+        raise ValueError(f"episodes must be at least 1, got {episodes}")
+    if max_steps < 1:
+        raise ValueError(f"max_steps must be at least 1, got {max_steps}")
+    actor, n_nodes = load_actor(checkpoint, n_nodes)
+    goal_set = load_goals(goals, n_nodes)
+    schedule = goal_schedule(len(goal_set), episodes, seed)
+    rank, size = mpi.rank(), mpi.size()
+    mine = list(range(rank, episodes, size))
+
+    env = DLOShapeEnv(n_nodes=n_nodes, goals=goal_set, threshold=threshold,
+                      time_mode=time_mode)
+    bar = tqdm(total=len(mine), desc=f"evaluating (rank 0 of {size})", unit="episode",
+               disable=not (show_progress and rank == 0))
+    try:
+        records = run_episodes(actor, env, mine, schedule, reinitialize, max_steps,
+                               progress=lambda: bar.update(1))
+    finally:
+        bar.close()
+        env.close()
+    gathered = mpi.gather(records)
+    if rank != 0:
+        return None, []
+    everything = sorted((r for part in gathered for r in part), key=lambda r: r.episode)
+    return summarize(everything), everything

@@ -1,0 +1,152 @@
+"""The Table I protocol: statistics, reinitialisation modes, the MPI split, bad checkpoints."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from dlo_course.ddpg import Actor, Critic, save_network
+from dlo_course.env import DLOShapeEnv
+from dlo_course.evaluation import (
+    CheckpointError, EpisodeRecord, evaluate, goal_schedule, load_actor, run_episodes,
+    summarize, wilson_interval,
+)
+
+MPIEXEC = Path(sys.executable).parent / "mpiexec"
+
+
+def record(i, done, distance, steps=5):
+    return EpisodeRecord(episode=i, goal_index=0, done=done, final_distance=distance,
+                         steps=steps, start_distance=0.2)
+
+
+def test_summary_statistics_on_hand_made_records():
+    records = [record(0, True, 0.04), record(1, True, 0.02), record(2, False, 0.09),
+               record(3, True, 0.03, steps=11)]
+    s = summarize(records)
+    assert s.episodes == 4
+    assert s.done_percent == 75.0
+    assert s.mean_distance == pytest.approx(0.045)
+    # population sigma: sqrt(((-.005)^2 + (-.025)^2 + .045^2 + (-.015)^2) / 4)
+    assert s.std_distance == pytest.approx(np.sqrt((0.005**2 + 0.025**2 + 0.045**2
+                                                    + 0.015**2) / 4))
+    assert s.best_distance == 0.02
+    assert s.mean_steps == pytest.approx(6.5)
+    assert s.done_ci_low < 75.0 < s.done_ci_high
+    with pytest.raises(ValueError):
+        summarize([])
+
+
+def test_wilson_interval_known_values():
+    # Textbook values of the 95% Wilson score interval.
+    assert wilson_interval(8, 10) == pytest.approx((0.4902, 0.9433), abs=1e-4)
+    assert wilson_interval(0, 10) == pytest.approx((0.0, 0.2775), abs=1e-4)
+    low, high = wilson_interval(995, 1000)
+    assert low == pytest.approx(0.98837, abs=1e-4) and high == pytest.approx(0.99786, abs=1e-4)
+    with pytest.raises(ValueError):
+        wilson_interval(3, 0)
+
+
+def test_goal_schedule_is_seeded():
+    np.testing.assert_array_equal(goal_schedule(930, 50, 7), goal_schedule(930, 50, 7))
+    assert not np.array_equal(goal_schedule(930, 50, 7), goal_schedule(930, 50, 8))
+
+
+@pytest.fixture
+def checkpoint(tmp_path):
+    torch.manual_seed(0)
+    path = tmp_path / "run"
+    path.mkdir()
+    save_network(Actor(obs_dim=18, act_dim=3, hidden_sizes=(32, 32)), path / "actor.pt")
+    return path
+
+
+@pytest.fixture
+def goals_2():
+    # Goals a few cm beside the straight rod: some episodes finish, some do not.
+    return np.array([[[1.22, 0.0, 1.26], [1.22, 0.0, 0.73]],
+                     [[1.25, 0.05, 1.24], [1.24, 0.04, 0.72]],
+                     [[1.10, 0.20, 1.10], [1.15, 0.15, 0.60]]])
+
+
+def test_bad_checkpoints_give_clear_errors(tmp_path, checkpoint):
+    with pytest.raises(CheckpointError, match="no checkpoint"):
+        load_actor(tmp_path / "nowhere")
+    corrupt = tmp_path / "corrupt"
+    corrupt.mkdir()
+    (corrupt / "actor.pt").write_bytes(b"\x00garbage")
+    with pytest.raises(CheckpointError, match="not a readable"):
+        load_actor(corrupt)
+    critic = tmp_path / "critic"
+    critic.mkdir()
+    save_network(Critic(obs_dim=18, act_dim=3), critic / "actor.pt")
+    with pytest.raises(CheckpointError, match="not an Actor"):
+        load_actor(critic)
+    pendulum = tmp_path / "pendulum"
+    pendulum.mkdir()
+    save_network(Actor(obs_dim=3, act_dim=1), pendulum / "actor.pt")
+    with pytest.raises(CheckpointError, match="not trained on DLOShape"):
+        load_actor(pendulum)
+    with pytest.raises(CheckpointError, match="trained for 2 nodes"):
+        load_actor(checkpoint, n_nodes=6)
+    actor, n_nodes = load_actor(checkpoint)
+    assert n_nodes == 2 and not actor.training
+
+
+def test_parallel_split_equals_one_process_with_reinitialization(checkpoint, goals_2):
+    actor, _ = load_actor(checkpoint)
+    schedule = goal_schedule(len(goals_2), 4, seed=3)
+    env = DLOShapeEnv(n_nodes=2, goals=goals_2, threshold=0.05)
+    try:
+        one = run_episodes(actor, env, [0, 1, 2, 3], schedule, True, max_steps=3)
+        rank0 = run_episodes(actor, env, [0, 2], schedule, True, max_steps=3)
+        rank1 = run_episodes(actor, env, [1, 3], schedule, True, max_steps=3)
+    finally:
+        env.close()
+    assert sorted(rank0 + rank1, key=lambda r: r.episode) == one
+    assert [r.goal_index for r in one] == list(schedule)
+
+
+def test_without_reinitialization_episodes_continue_from_the_last_shape(checkpoint, goals_2):
+    actor, _ = load_actor(checkpoint)
+    schedule = np.array([2, 2])
+    env = DLOShapeEnv(n_nodes=2, goals=goals_2, threshold=0.001)
+    try:
+        chained = run_episodes(actor, env, [0, 1], schedule, False, max_steps=3)
+        fresh = run_episodes(actor, env, [0, 1], schedule, True, max_steps=3)
+    finally:
+        env.close()
+    # Same goal twice: without reinitialisation the second episode starts where the first
+    # ended; with it, from the initial shape again.
+    assert chained[1].start_distance == pytest.approx(chained[0].final_distance)
+    assert fresh[1].start_distance == pytest.approx(fresh[0].start_distance)
+    assert chained[1].start_distance != pytest.approx(fresh[1].start_distance)
+
+
+@pytest.mark.mpi
+def test_evaluate_under_mpiexec_matches_one_process(tmp_path, checkpoint, goals_2):
+    goal_file = tmp_path / "goals.npy"
+    np.save(goal_file, goals_2)
+    summary, records = evaluate(checkpoint, goals=goal_file, episodes=4, max_steps=3, seed=1,
+                                show_progress=False)
+    out = tmp_path / "mpi.json"
+    cmd = [str(MPIEXEC), "-n", "2", sys.executable, "-m", "dlo_course.cli", "evaluate",
+           "--checkpoint", str(checkpoint), "--database", str(goal_file), "--episodes", "4",
+           "--max-steps", "3", "--seed", "1", "--out", str(out)]
+    subprocess.run(cmd, check=True, timeout=300, capture_output=True)
+    result = json.loads(out.read_text())
+    assert result["summary"] == pytest.approx(summary.as_dict())
+    assert [EpisodeRecord(**r) for r in result["episodes"]] == records
+
+
+def test_cli_reports_a_mismatched_checkpoint_without_a_traceback(checkpoint):
+    result = subprocess.run([sys.executable, "-m", "dlo_course.cli", "evaluate",
+                             "--checkpoint", str(checkpoint), "--nodes", "6",
+                             "--episodes", "1"], capture_output=True, text=True, timeout=120)
+    assert result.returncode != 0
+    assert "trained for 2 nodes" in result.stderr
+    assert "Traceback" not in result.stderr
