@@ -1,0 +1,367 @@
+"""Deep Deterministic Policy Gradient (DDPG), as used in Section IV of the paper.
+
+Four networks take part (Fig. 2 of the paper):
+
+* the **actor** mu(s): state -> action, the policy the robot follows;
+* the **critic** Q(s, a): how much future reward taking action a in state s is worth;
+* their **targets** mu'(s) and Q'(s, a): slowly moving copies used to compute the learning
+  target of the critic, which keeps that target from chasing itself.
+
+One update (:meth:`DDPG.update`) on a batch of transitions (s, a, r, s', d) does:
+
+1. Bellman target (eq. 1):      Q_B = r + gamma * Q'(s', mu'(s')) * (1 - d)
+2. critic step on               critic loss = MSE(Q(s, a), Q_B)
+3. actor step on                policy loss = -mean Q(s, mu(s))
+4. Polyak averaging (soft update) of both targets:   W_T <- tau * W + (1 - tau) * W_T
+
+Steps 1-4 are written as small pure functions (:func:`bellman_target`, :func:`critic_loss`,
+:func:`policy_loss`, :func:`polyak_update`) that the lessons ask you to write yourself.
+
+Shapes: ``B`` is the batch size, ``obs_dim`` the observation length (18/30/42 for 2/4/6 rod
+nodes), ``act_dim`` the action length (3). Every Q-value tensor has shape (B, 1), and so do
+rewards and done flags once inside :meth:`DDPG.update`.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+
+@dataclass
+class DDPGConfig:
+    """Hyperparameters of DDPG. The defaults are the paper's (Section V-B)."""
+
+    actor_lr: float = 1e-4
+    """Adam learning rate of the actor (alpha_A)."""
+    critic_lr: float = 1e-3
+    """Adam learning rate of the critic (alpha_C). Ten times the actor's: the actor follows
+    the critic's gradient, so the critic has to be the better-trained of the two."""
+    batch_size: int = 128
+    """Transitions per update (N). Learning starts once the buffer holds one batch."""
+    buffer_size: int = 50_000
+    """Capacity of the replay buffer of each agent."""
+    gamma: float = 0.99
+    """Discount factor: a reward k steps ahead counts gamma**k (horizon ~ 1/(1-gamma) = 100)."""
+    tau: float = 0.01
+    """Polyak factor of the soft target update, applied after every update."""
+    hidden_sizes: tuple[int, ...] = (256, 256, 256)
+    """Widths of the hidden layers of the actor and of the critic (3 x 256, ReLU)."""
+    final_init: float = 3e-3
+    """The output layers start with weights and biases uniform in [-final_init, final_init]
+    (Lillicrap et al., whose initialisation the paper follows), so initial actions and
+    Q-values are close to 0 and the tanh is not saturated. The hidden layers keep PyTorch's
+    default, which is Lillicrap's fan-in uniform initialisation."""
+    noise_theta: float = 0.15
+    """Ornstein–Uhlenbeck mean-reversion rate (the authors' code)."""
+    noise_sigma: float = 0.3
+    """Ornstein–Uhlenbeck noise scale, in units of the normalised action [-1, 1]."""
+    noise_mu: float = 0.0
+    """Ornstein–Uhlenbeck mean."""
+
+    def __post_init__(self) -> None:
+        self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)  # a list from JSON
+        if self.batch_size < 1 or self.buffer_size < 1:
+            raise ValueError("batch_size and buffer_size must be positive")
+        if not 0.0 <= self.gamma <= 1.0:
+            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
+        if not 0.0 < self.tau <= 1.0:
+            raise ValueError(f"tau must be in (0, 1], got {self.tau}")
+        if self.actor_lr <= 0 or self.critic_lr <= 0:
+            raise ValueError("learning rates must be positive")
+
+
+# --- the pieces of one update, as pure functions ---
+
+
+def bellman_target(reward: torch.Tensor, next_q: torch.Tensor, done: torch.Tensor,
+                   gamma: float) -> torch.Tensor:
+    """Eq. (1) of the paper: Q_B = r + gamma * Q'(s', mu'(s')) * (1 - d).
+
+    Args:
+        reward: (B, 1) rewards r.
+        next_q: (B, 1) target critic's value of the next state under the target actor.
+        done: (B, 1) 1.0 where s' is terminal: nothing follows it, so no bootstrapping.
+        gamma: discount factor.
+
+    Returns:
+        (B, 1) the critic's regression target. Call it under ``torch.no_grad()``: the target
+        is a fixed label, not something to differentiate through.
+    """
+    return reward + gamma * next_q * (1.0 - done)
+
+
+def critic_loss(q: torch.Tensor, q_target: torch.Tensor) -> torch.Tensor:
+    """Mean squared error between the critic's Q(s, a) and the Bellman target Q_B.
+
+    Args:
+        q: (B, 1) the critic's estimates.
+        q_target: (B, 1) Bellman targets, same shape.
+
+    Returns:
+        A scalar tensor.
+    """
+    if q.shape != q_target.shape:
+        # The classic silent DDPG bug: (B, 1) - (B,) broadcasts to (B, B), and the loss then
+        # compares every Q with every target. Refuse instead of learning nonsense.
+        raise ValueError(f"q {tuple(q.shape)} and q_target {tuple(q_target.shape)} "
+                         "must have the same shape")
+    return ((q - q_target) ** 2).mean()
+
+
+def policy_loss(q: torch.Tensor) -> torch.Tensor:
+    """Policy (actor) loss: -mean Q(s, mu(s)). Minimising it climbs the critic's estimate.
+
+    Args:
+        q: (B, 1) the critic's values of the actor's own actions, Q(s, mu(s)).
+
+    Returns:
+        A scalar tensor.
+    """
+    return -q.mean()
+
+
+@torch.no_grad()
+def polyak_update(target: nn.Module, source: nn.Module, tau: float) -> None:
+    """Soft update, in place: W_T <- tau * W + (1 - tau) * W_T for every parameter.
+
+    Args:
+        target: the target network (actor target or critic target), modified in place.
+        source: the network being trained, same architecture.
+        tau: Polyak factor; with tau = 0.01 the target moves 1 % of the way each update.
+    """
+    for w_target, w in zip(target.parameters(), source.parameters(), strict=True):
+        w_target.mul_(1.0 - tau).add_(w, alpha=tau)
+
+
+# --- the networks ---
+
+
+def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int, final_init: float) -> nn.Sequential:
+    """Fully connected network: Linear-ReLU for each hidden layer, then a Linear output."""
+    layers: list[nn.Module] = []
+    width = in_dim
+    for h in hidden_sizes:
+        layers += [nn.Linear(width, h), nn.ReLU()]
+        width = h
+    out = nn.Linear(width, out_dim)
+    nn.init.uniform_(out.weight, -final_init, final_init)
+    nn.init.uniform_(out.bias, -final_init, final_init)
+    layers.append(out)
+    return nn.Sequential(*layers)
+
+
+class Actor(nn.Module):
+    """The policy mu(s): observation -> action inside the action bounds.
+
+    A tanh squashes the output into [-1, 1] (the paper: the tip velocities stay in [-1, 1]),
+    then it is scaled to the environment's bounds [low, high], so the same class also drives
+    e.g. Pendulum-v1 whose torque lies in [-2, 2].
+
+    Args:
+        obs_dim: observation length.
+        act_dim: action length.
+        action_low, action_high: (act_dim,) bounds of the action space (or scalars).
+        hidden_sizes: widths of the hidden layers.
+        final_init: half-width of the uniform initialisation of the output layer.
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, action_low: Any = -1.0,
+                 action_high: Any = 1.0, hidden_sizes: Sequence[int] = (256, 256, 256),
+                 final_init: float = 3e-3) -> None:
+        super().__init__()
+        low = np.broadcast_to(np.asarray(action_low, dtype=np.float32), (act_dim,))
+        high = np.broadcast_to(np.asarray(action_high, dtype=np.float32), (act_dim,))
+        if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high)) and np.all(high > low)):
+            raise ValueError(f"action bounds must be finite with high > low, got {low}, {high}")
+        self.init_kwargs = dict(obs_dim=int(obs_dim), act_dim=int(act_dim),
+                                action_low=low.tolist(), action_high=high.tolist(),
+                                hidden_sizes=list(hidden_sizes), final_init=float(final_init))
+        self.net = mlp(obs_dim, hidden_sizes, act_dim, final_init)
+        # Buffers, not parameters: saved with the network but never trained.
+        self.register_buffer("action_scale", torch.as_tensor((high - low) / 2))
+        self.register_buffer("action_bias", torch.as_tensor((high + low) / 2))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        """obs: (B, obs_dim) -> actions (B, act_dim) in [low, high]."""
+        return self.action_bias + self.action_scale * torch.tanh(self.net(obs))
+
+
+class Critic(nn.Module):
+    """The action-value function Q(s, a): one scalar per (observation, action) pair.
+
+    The action enters at the input, concatenated with the observation.
+
+    Args:
+        obs_dim: observation length.
+        act_dim: action length.
+        hidden_sizes: widths of the hidden layers.
+        final_init: half-width of the uniform initialisation of the output layer.
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, hidden_sizes: Sequence[int] = (256, 256, 256),
+                 final_init: float = 3e-3) -> None:
+        super().__init__()
+        self.init_kwargs = dict(obs_dim=int(obs_dim), act_dim=int(act_dim),
+                                hidden_sizes=list(hidden_sizes), final_init=float(final_init))
+        self.net = mlp(obs_dim + act_dim, hidden_sizes, 1, final_init)
+
+    def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
+        """obs: (B, obs_dim), act: (B, act_dim) -> Q-values (B, 1)."""
+        return self.net(torch.cat([obs, act], dim=-1))
+
+
+def save_network(net: Actor | Critic, path: str | Path) -> None:
+    """Save a network with what is needed to rebuild it (see :func:`load_network`)."""
+    torch.save({"class": type(net).__name__, "kwargs": net.init_kwargs,
+                "state_dict": net.state_dict()}, path)
+
+
+def load_network(path: str | Path) -> Actor | Critic:
+    """Rebuild an :class:`Actor` or :class:`Critic` saved by :func:`save_network`."""
+    blob = torch.load(path, map_location="cpu", weights_only=True)
+    cls = {"Actor": Actor, "Critic": Critic}[blob["class"]]
+    net = cls(**blob["kwargs"])
+    net.load_state_dict(blob["state_dict"])
+    return net
+
+
+# --- the agent ---
+
+
+GradReducer = Callable[[nn.Module], None]
+
+
+class DDPG:
+    """A DDPG agent: actor, critic, their targets and their Adam optimisers.
+
+    Args:
+        obs_dim: observation length.
+        act_dim: action length.
+        action_low, action_high: bounds of the action space (arrays of act_dim, or scalars).
+        config: hyperparameters; the paper's by default.
+    """
+
+    def __init__(self, obs_dim: int, act_dim: int, action_low: Any = -1.0,
+                 action_high: Any = 1.0, config: DDPGConfig | None = None) -> None:
+        self.config = cfg = config or DDPGConfig()
+        self.actor = Actor(obs_dim, act_dim, action_low, action_high, cfg.hidden_sizes,
+                           cfg.final_init)
+        self.critic = Critic(obs_dim, act_dim, cfg.hidden_sizes, cfg.final_init)
+        # Targets start as exact copies and are only ever changed by polyak_update.
+        self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
+        self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
+        self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=cfg.actor_lr)
+        self.critic_optimizer = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr)
+
+    def sync_targets(self) -> None:
+        """Make the targets exact copies of the networks again (after they were replaced,
+        e.g. by an MPI broadcast)."""
+        self.actor_target.load_state_dict(self.actor.state_dict())
+        self.critic_target.load_state_dict(self.critic.state_dict())
+
+    @torch.no_grad()
+    def act(self, obs: np.ndarray, noise: Any = None) -> np.ndarray:
+        """The action to send to the environment.
+
+        Args:
+            obs: (obs_dim,) one observation (or (B, obs_dim) several).
+            noise: exploration noise with a ``sample()`` method returning (act_dim,) values in
+                units of the normalised action [-1, 1] (e.g. :class:`~dlo_course.noise.OUNoise`);
+                ``None`` for the deterministic policy (evaluation).
+
+        Returns:
+            float32 array, (act_dim,) (or (B, act_dim)), clipped to the action bounds.
+        """
+        obs_t = torch.as_tensor(np.asarray(obs, dtype=np.float32))
+        action = self.actor(obs_t).numpy()
+        scale = self.actor.action_scale.numpy()
+        if noise is not None:
+            # Noise is drawn for the normalised action and scaled like the actor's tanh output,
+            # so sigma = 0.3 means the same exploration on any action range.
+            action = action + scale * noise.sample()
+        low = self.actor.action_bias.numpy() - scale
+        high = self.actor.action_bias.numpy() + scale
+        return np.clip(action, low, high).astype(np.float32)
+
+    def update(self, batch: Mapping[str, Any], grad_reducer: GradReducer | None = None
+               ) -> dict[str, float]:
+        """One DDPG update: critic step, actor step, soft update of both targets.
+
+        Args:
+            batch: arrays or tensors (as from :meth:`ReplayBuffer.sample`): ``obs``
+                (B, obs_dim), ``act`` (B, act_dim), ``rew`` (B,), ``next_obs`` (B, obs_dim),
+                ``done`` (B,).
+            grad_reducer: called with the critic, then with the actor, after ``backward()``
+                and before the optimiser step. With MPI it sums (or averages) the gradients of
+                all agents, so that every agent takes the same step
+                (:func:`dlo_course.mpi.allreduce_gradients`).
+
+        Returns:
+            Scalars for logging: ``critic_loss``, ``policy_loss`` and ``q_mean`` (mean Q(s, a)
+            of the batch).
+        """
+        cfg = self.config
+        obs, act, next_obs = (torch.as_tensor(batch[k], dtype=torch.float32)
+                              for k in ("obs", "act", "next_obs"))
+        # (B,) -> (B, 1), the shape of the critic's output; see critic_loss for why it matters.
+        rew = torch.as_tensor(batch["rew"], dtype=torch.float32).reshape(-1, 1)
+        done = torch.as_tensor(batch["done"], dtype=torch.float32).reshape(-1, 1)
+
+        # 1-2. Critic: regress Q(s, a) on the Bellman target built from the target networks.
+        with torch.no_grad():
+            next_q = self.critic_target(next_obs, self.actor_target(next_obs))
+            q_target = bellman_target(rew, next_q, done, cfg.gamma)
+        q = self.critic(obs, act)
+        loss_q = critic_loss(q, q_target)
+        self.critic_optimizer.zero_grad()
+        loss_q.backward()
+        if grad_reducer is not None:
+            grad_reducer(self.critic)
+        self.critic_optimizer.step()
+
+        # 3. Actor: follow the (just updated) critic uphill. The critic is frozen meanwhile:
+        # the policy loss must move the actor only, and this skips its useless gradients.
+        self.critic.requires_grad_(False)
+        loss_pi = policy_loss(self.critic(obs, self.actor(obs)))
+        self.actor_optimizer.zero_grad()
+        loss_pi.backward()
+        if grad_reducer is not None:
+            grad_reducer(self.actor)
+        self.actor_optimizer.step()
+        self.critic.requires_grad_(True)
+
+        # 4. Targets trail the trained networks.
+        polyak_update(self.actor_target, self.actor, cfg.tau)
+        polyak_update(self.critic_target, self.critic, cfg.tau)
+
+        return {"critic_loss": loss_q.item(), "policy_loss": loss_pi.item(),
+                "q_mean": q.mean().item()}
+
+    def state_dict(self) -> dict[str, Any]:
+        """A snapshot of the networks, targets and optimiser states (Adam's moments included).
+
+        Deep-copied: PyTorch's ``state_dict()`` returns references to live tensors, and an
+        optimiser loading them would share its moment estimates with this agent."""
+        return copy.deepcopy({
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "actor_target": self.actor_target.state_dict(),
+            "critic_target": self.critic_target.state_dict(),
+            "actor_optimizer": self.actor_optimizer.state_dict(),
+            "critic_optimizer": self.critic_optimizer.state_dict(),
+        })
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+        self.actor_target.load_state_dict(state["actor_target"])
+        self.critic_target.load_state_dict(state["critic_target"])
+        self.actor_optimizer.load_state_dict(state["actor_optimizer"])
+        self.critic_optimizer.load_state_dict(state["critic_optimizer"])

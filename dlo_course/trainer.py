@@ -1,0 +1,439 @@
+"""The training loop: many DDPG agents learning one policy together, as in the paper.
+
+Run it as one process, or as N MPI processes (``mpiexec -n N dlo-course train ...``). Each
+MPI rank is one agent with its own environment, seed, goals, replay buffer and exploration
+noise; all ranks share the networks by starting from rank 0's weights and applying the same
+all-reduced gradient at every update (see :mod:`dlo_course.mpi`).
+
+One episode of one agent:
+
+    reset the environment (a new goal) and the OU noise
+    repeat at most steps_per_episode times:
+        act with the actor + noise, step the environment, store the transition
+        once every agent's buffer holds a batch: one DDPG update (gradients all-reduced)
+        stop when the episode ends (terminated or truncated) for *every* agent
+
+An agent whose episode ended early keeps making updates (from its own buffer) until the
+slowest agent is done: an all-reduce is collective, so if one rank skipped an update the
+others would wait for it forever.
+
+Rank 0 writes, in ``out_dir``:
+
+* ``config.json``: the configuration, number of agents and library versions;
+* ``progress.csv``: one row per episode (all agents together; see :data:`PROGRESS_COLUMNS`);
+* ``actor.pt``, ``critic.pt``: the latest networks (:func:`dlo_course.ddpg.load_network`);
+* ``checkpoints/``: every ``checkpoint_every`` episodes, the full state of the run, so that
+  ``train(config, resume=True)`` continues a killed run and gives the same result as a run
+  that was never interrupted.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import dataclasses
+import functools
+import json
+import math
+import os
+import platform
+import shutil
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from dlo_course import mpi
+from dlo_course.ddpg import DDPG, DDPGConfig, save_network
+from dlo_course.noise import OUNoise
+from dlo_course.replay_buffer import ReplayBuffer
+
+
+@dataclass
+class TrainConfig:
+    """Everything that defines a training run. Defaults follow the paper, for 2 rod nodes."""
+
+    env_id: str = "DLOShape-v0"
+    """Gymnasium id of the environment; any continuous-control (Box) environment works."""
+    env_kwargs: dict[str, Any] = field(default_factory=lambda: {"n_nodes": 2})
+    """Keyword arguments of ``gymnasium.make`` (for the rod: ``n_nodes`` = 2, 4 or 6)."""
+    episodes: int = 63
+    """Episodes per agent (the paper: 63, i.e. 32 x 63 = 2016 episodes in all)."""
+    steps_per_episode: int = 300
+    """Maximum actions per episode; also passed as ``max_episode_steps`` to the environment."""
+    seed: int = 0
+    """Run seed; each agent's seed is derived from it and its rank (:func:`mpi.rank_seed`)."""
+    out_dir: str = "runs/train"
+    """Directory of the run's files."""
+    checkpoint_every: int = 10
+    """Save the full training state every this many episodes (and after the last one)."""
+    reduce: str = "sum"
+    """How gradients are combined over agents: ``"sum"`` (the paper) or ``"mean"``."""
+    warmup: int | None = None
+    """Updates start once every agent's buffer holds this many transitions
+    (``None``: one batch, as in the paper and the authors' code)."""
+    expected_agents: int | None = None
+    """Number of MPI ranks the preset is meant for; a different number only gives a warning."""
+    torch_threads: int = 1
+    """PyTorch threads per process. One: the ranks already fill the cores, and more threads
+    per rank would fight over them."""
+    ddpg: DDPGConfig = field(default_factory=DDPGConfig)
+    """DDPG hyperparameters (networks, learning rates, buffer, noise)."""
+
+    def __post_init__(self) -> None:
+        if isinstance(self.ddpg, dict):  # read back from config.json
+            self.ddpg = DDPGConfig(**self.ddpg)
+        self.env_kwargs = dict(self.env_kwargs)
+        if self.episodes < 1:
+            raise ValueError(f"episodes must be at least 1, got {self.episodes}")
+        if self.steps_per_episode < 1:
+            raise ValueError(f"steps_per_episode must be at least 1, got {self.steps_per_episode}")
+        if self.checkpoint_every < 1:
+            raise ValueError(f"checkpoint_every must be at least 1, got {self.checkpoint_every}")
+        if self.reduce not in ("sum", "mean"):
+            raise ValueError(f"reduce must be 'sum' or 'mean', got {self.reduce!r}")
+        if self.warmup is not None and self.warmup < 1:
+            raise ValueError(f"warmup must be at least 1, got {self.warmup}")
+        if "max_episode_steps" in self.env_kwargs:
+            raise ValueError("set steps_per_episode, not env_kwargs['max_episode_steps']")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
+        return cls(**d)
+
+
+PRESETS: dict[str, TrainConfig] = {
+    # Seconds of learning code on top of ~40 simulator steps per agent: for CI and notebooks.
+    # The batch is small so that updates do happen within 2 x 20 steps.
+    "smoke": TrainConfig(episodes=2, steps_per_episode=20, checkpoint_every=1,
+                         out_dir="runs/smoke", ddpg=DDPGConfig(batch_size=16)),
+    # About an hour on a 4-core laptop at ~5 simulator actions per second per core.
+    "laptop": TrainConfig(episodes=60, steps_per_episode=150, checkpoint_every=5,
+                          out_dir="runs/laptop", expected_agents=4),
+    # The paper: 32 agents x 63 episodes x 300 steps, gradients summed.
+    "paper": TrainConfig(episodes=63, steps_per_episode=300, checkpoint_every=7,
+                         out_dir="runs/paper", expected_agents=32, reduce="sum"),
+}
+
+
+def preset(name: str, **overrides: Any) -> TrainConfig:
+    """A copy of preset ``name`` ("smoke", "laptop" or "paper") with some fields changed."""
+    if name not in PRESETS:
+        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
+    return dataclasses.replace(copy.deepcopy(PRESETS[name]), **overrides)
+
+
+def load_config(run_dir: str | Path) -> TrainConfig:
+    """The :class:`TrainConfig` of a run, read from its ``config.json``."""
+    return TrainConfig.from_dict(json.loads((Path(run_dir) / "config.json").read_text())["config"])
+
+
+PROGRESS_COLUMNS = [
+    "episode",         # 1, 2, ... (each agent has played this many episodes)
+    "transitions",     # environment steps so far, all agents together
+    "updates",         # gradient updates so far (the same on every agent)
+    "wall_time",       # seconds since the run started (only time spent running is counted)
+    "reward_mean",     # episode reward (sum over its steps), mean over agents: Fig. 4
+    "reward_min",      # ... and its min and max over agents
+    "reward_max",
+    "length_mean",     # steps per episode, mean over agents
+    "distance_mean",   # info["distance"] at the end of the episode, mean over agents (m)
+    "success_rate",    # share of agents whose episode ended with info["is_success"]
+    "critic_loss",     # mean over the episode's updates and over agents
+    "policy_loss",
+    "q_mean",
+]
+
+
+# --- one episode of one agent ---
+
+
+def _episode_seed(agent_seed: int, episode: int) -> int:
+    # Reseeding every reset from (agent, episode) makes the goals of a resumed run the same as
+    # an uninterrupted run's without saving the simulator's random state.
+    return int(np.random.SeedSequence([agent_seed, episode]).generate_state(1)[0])
+
+
+def run_episode(env: gymnasium.Env, agent: DDPG, buffer: ReplayBuffer, noise: OUNoise,
+                config: TrainConfig, seed: int, grad_reducer: Any) -> dict[str, float]:
+    """Play one training episode, updating the networks on the way.
+
+    Every rank calls this in step with the others (see the module docstring).
+
+    Returns:
+        This agent's ``reward`` (sum over the episode), ``length``, final ``distance`` and
+        ``success`` (NaN if the environment does not report them), number of ``updates``
+        and the mean ``critic_loss``, ``policy_loss``, ``q_mean`` over its updates.
+    """
+    warmup = config.warmup or config.ddpg.batch_size
+    obs, info = env.reset(seed=seed)
+    noise.reset()
+    total_reward, length, running = 0.0, 0, True
+    stats: list[dict[str, float]] = []
+    for _ in range(config.steps_per_episode):
+        if running:
+            action = agent.act(obs, noise)
+            next_obs, reward, terminated, truncated, info = env.step(action)
+            # done = terminated only: a time limit is not a terminal state (see ReplayBuffer.add).
+            buffer.add(obs, action, reward, next_obs, terminated)
+            obs = next_obs
+            total_reward += float(reward)
+            length += 1
+            running = not (terminated or truncated)
+        # Learn once every agent holds a batch; decided together because updates are collective.
+        if mpi.allreduce_scalars(len(buffer), "min")[0] >= warmup:
+            stats.append(agent.update(buffer.sample(config.ddpg.batch_size), grad_reducer))
+        if mpi.allreduce_scalars(float(running), "max")[0] == 0.0:
+            break  # every agent's episode is over
+
+    def mean_of(key: str) -> float:
+        return float(np.mean([s[key] for s in stats])) if stats else math.nan
+
+    return {
+        "reward": total_reward,
+        "length": float(length),
+        "distance": float(info.get("distance", math.nan)),
+        "success": float(info["is_success"]) if "is_success" in info else math.nan,
+        "updates": float(len(stats)),
+        "critic_loss": mean_of("critic_loss"),
+        "policy_loss": mean_of("policy_loss"),
+        "q_mean": mean_of("q_mean"),
+    }
+
+
+def _nanmean(values: list[float]) -> float:
+    finite = [v for v in values if not math.isnan(v)]
+    return float(np.mean(finite)) if finite else math.nan
+
+
+def progress_row(episode: int, counters: dict[str, Any], per_agent: list[dict[str, float]]
+                 ) -> dict[str, float]:
+    """The ``progress.csv`` row of one episode, from the list of every agent's episode stats."""
+    rewards = [a["reward"] for a in per_agent]
+    return {
+        "episode": episode,
+        "transitions": counters["transitions"],
+        "updates": counters["updates"],
+        "wall_time": counters["elapsed"],
+        "reward_mean": float(np.mean(rewards)),
+        "reward_min": float(np.min(rewards)),
+        "reward_max": float(np.max(rewards)),
+        "length_mean": float(np.mean([a["length"] for a in per_agent])),
+        **{key: _nanmean([a[src] for a in per_agent]) for key, src in [
+            ("distance_mean", "distance"), ("success_rate", "success"),
+            ("critic_loss", "critic_loss"), ("policy_loss", "policy_loss"),
+            ("q_mean", "q_mean")]},
+    }
+
+
+def _format(value: float) -> str:
+    if isinstance(value, int):
+        return str(value)
+    return "" if math.isnan(value) else format(value, ".8g")
+
+
+# --- files ---
+
+
+def _atomic_torch_save(obj: Any, path: Path) -> None:
+    # Write then rename: a run killed while saving leaves the previous file intact.
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def _write_json(obj: Any, path: Path) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(obj, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+def _save_checkpoint(out: Path, agent: DDPG, buffer: ReplayBuffer, noise: OUNoise,
+                     counters: dict[str, Any], config: TrainConfig) -> None:
+    """Every rank saves its own state; rank 0 the shared networks and optimisers. The
+    ``latest.json`` pointer moves only once every file is complete."""
+    ckpt_root = out / "checkpoints"
+    name = f"episode{counters['episodes_done']:06d}"
+    ckpt = ckpt_root / name
+    if mpi.is_root():
+        ckpt.mkdir(parents=True, exist_ok=True)
+    mpi.barrier()
+    _atomic_torch_save({"buffer": buffer.state_dict(), "noise": noise.state_dict(),
+                        "torch_rng": torch.get_rng_state()},
+                       ckpt / f"state_rank{mpi.rank()}.pt")
+    if mpi.is_root():
+        _atomic_torch_save({"agent": agent.state_dict(), "counters": dict(counters),
+                            "n_agents": mpi.size(), "config": config.to_dict()},
+                           ckpt / "shared.pt")
+    mpi.barrier()
+    if mpi.is_root():
+        _write_json({"checkpoint": name, **counters}, ckpt_root / "latest.json")
+        for old in ckpt_root.iterdir():
+            if old.is_dir() and old.name != name:
+                shutil.rmtree(old)
+        save_network(agent.actor, out / "actor.pt")
+        save_network(agent.critic, out / "critic.pt")
+
+
+# Fields that may change when a run is resumed (e.g. to train for more episodes).
+_RESUMABLE_CHANGES = {"episodes", "out_dir", "checkpoint_every", "expected_agents",
+                      "torch_threads"}
+
+
+def _load_checkpoint(out: Path, agent: DDPG, buffer: ReplayBuffer, noise: OUNoise,
+                     config: TrainConfig) -> dict[str, Any] | None:
+    """Restore the latest checkpoint of ``out`` into this rank's objects; return the counters,
+    or ``None`` if there is no checkpoint."""
+    pointer = out / "checkpoints" / "latest.json"
+    if not pointer.exists():
+        return None
+    ckpt = out / "checkpoints" / json.loads(pointer.read_text())["checkpoint"]
+    # Our own files, holding NumPy arrays and generator states: not weights_only.
+    shared = torch.load(ckpt / "shared.pt", weights_only=False)
+    if shared["n_agents"] != mpi.size():
+        raise ValueError(f"{out} was trained with {shared['n_agents']} agents; resume it with "
+                         f"the same number of MPI ranks (got {mpi.size()})")
+    saved, now = shared["config"], config.to_dict()
+    changed = sorted(k for k in now if k not in _RESUMABLE_CHANGES and saved.get(k) != now[k])
+    if changed:
+        raise ValueError(f"cannot resume {out}: the configuration differs in {changed}")
+    mine = torch.load(ckpt / f"state_rank{mpi.rank()}.pt", weights_only=False)
+    agent.load_state_dict(shared["agent"])
+    buffer.load_state_dict(mine["buffer"])
+    noise.load_state_dict(mine["noise"])
+    torch.set_rng_state(mine["torch_rng"])
+    return dict(shared["counters"])
+
+
+def _open_progress(path: Path, keep_episodes: int) -> tuple[Any, csv.DictWriter]:
+    """Open ``progress.csv`` for appending, keeping only the rows of the first
+    ``keep_episodes`` episodes (rows written after the last checkpoint are replayed).
+    Returns the open file and a CSV writer on it."""
+    rows: list[dict[str, str]] = []
+    if keep_episodes > 0 and path.exists():
+        with path.open(newline="") as f:
+            rows = [r for r in csv.DictReader(f) if int(r["episode"]) <= keep_episodes]
+    f = path.open("w", newline="")
+    writer = csv.DictWriter(f, fieldnames=PROGRESS_COLUMNS)
+    writer.writeheader()
+    writer.writerows(rows)
+    f.flush()
+    return f, writer
+
+
+# --- the run ---
+
+
+def make_env(config: TrainConfig) -> gymnasium.Env:
+    """``gymnasium.make`` the configured environment, checking it suits DDPG."""
+    try:
+        env = gymnasium.make(config.env_id, max_episode_steps=config.steps_per_episode,
+                             **config.env_kwargs)
+    except (gymnasium.error.Error, TypeError) as err:  # unknown id, or wrong env_kwargs
+        raise ValueError(f"cannot make environment {config.env_id!r}: {err}") from err
+    for name, space in (("observation", env.observation_space), ("action", env.action_space)):
+        if not (isinstance(space, gymnasium.spaces.Box) and len(space.shape) == 1):
+            env.close()
+            raise ValueError(f"DDPG needs a 1-D Box {name} space; {config.env_id} has {space}")
+    return env
+
+
+def train(config: TrainConfig, resume: bool = False, progress: bool = True,
+          overwrite: bool = False) -> Path:
+    """Train DDPG agents as configured; every MPI rank runs this function as one agent.
+
+    Args:
+        config: the run's configuration (see :data:`PRESETS`).
+        resume: continue from the last checkpoint in ``config.out_dir`` (start afresh if
+            there is none). ``episodes`` may be raised to train a finished run further.
+        progress: show a progress bar (rank 0 only).
+        overwrite: allow starting a new run in a directory that already holds one.
+
+    Returns:
+        The run directory.
+    """
+    torch.set_num_threads(config.torch_threads)
+    out = Path(config.out_dir)
+    n_agents, root = mpi.size(), mpi.is_root()
+    if not resume and not overwrite and (out / "progress.csv").exists():
+        # Every rank sees the same files, so every rank raises: nobody is left waiting.
+        raise FileExistsError(f"{out} already holds a run: resume it (--resume) or choose "
+                              "another directory (--out), or pass --overwrite")
+    if root and config.expected_agents and n_agents != config.expected_agents:
+        print(f"warning: this configuration is meant for {config.expected_agents} agents "
+              f"(mpiexec -n {config.expected_agents}); running with {n_agents}",
+              file=sys.stderr)
+
+    agent_seed = mpi.rank_seed(config.seed, mpi.rank())
+    torch.manual_seed(agent_seed)  # network initialisation (rank 0's wins, see below)
+    env = make_env(config)
+    obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
+    agent = DDPG(obs_dim, act_dim, env.action_space.low, env.action_space.high, config.ddpg)
+    # default_rng hashes its seed, so the neighbouring seeds give unrelated streams.
+    buffer = ReplayBuffer(obs_dim, act_dim, config.ddpg.buffer_size, seed=agent_seed)
+    noise = OUNoise(act_dim, config.ddpg.noise_theta, config.ddpg.noise_sigma,
+                    config.ddpg.noise_mu, seed=agent_seed + 1)
+    # All agents start from rank 0's networks; the targets are copies of them.
+    mpi.broadcast_module(agent.actor)
+    mpi.broadcast_module(agent.critic)
+    agent.sync_targets()
+
+    counters = {"episodes_done": 0, "transitions": 0, "updates": 0, "elapsed": 0.0}
+    if resume:
+        loaded = _load_checkpoint(out, agent, buffer, noise, config)
+        if loaded is not None:
+            counters = loaded
+        elif root:
+            print(f"no checkpoint in {out}: starting from scratch", file=sys.stderr)
+    elif root and (out / "checkpoints").exists():
+        shutil.rmtree(out / "checkpoints")  # overwrite: stale checkpoints must not be resumed
+
+    progress_file = None
+    if root:
+        out.mkdir(parents=True, exist_ok=True)
+        _write_json({"config": config.to_dict(), "n_agents": n_agents,
+                     "versions": {"python": platform.python_version(), "torch": torch.__version__,
+                                  "gymnasium": gymnasium.__version__, "numpy": np.__version__}},
+                    out / "config.json")
+        progress_file, writer = _open_progress(out / "progress.csv", counters["episodes_done"])
+
+    reducer = (functools.partial(mpi.allreduce_gradients, op=config.reduce)
+               if n_agents > 1 else None)
+    bar = tqdm(total=config.episodes, initial=counters["episodes_done"], unit="episode",
+               disable=not (progress and root), dynamic_ncols=True)
+    start = time.perf_counter() - counters["elapsed"]
+    try:
+        for episode in range(counters["episodes_done"], config.episodes):
+            mine = run_episode(env, agent, buffer, noise, config,
+                               _episode_seed(agent_seed, episode), reducer)
+            per_agent = mpi.allgather(mine)  # every agent's stats, on every rank
+            counters["episodes_done"] = episode + 1
+            counters["updates"] += int(mine["updates"])  # identical on every rank
+            counters["transitions"] += int(sum(a["length"] for a in per_agent))
+            counters["elapsed"] = time.perf_counter() - start
+            if root:
+                row = progress_row(episode + 1, counters, per_agent)
+                writer.writerow({k: _format(v) for k, v in row.items()})
+                progress_file.flush()
+                bar.set_postfix(reward=f"{row['reward_mean']:.3g}")
+                bar.update(1)
+            if (episode + 1) % config.checkpoint_every == 0 or episode + 1 == config.episodes:
+                if not mpi.modules_in_sync(agent.actor, agent.critic):
+                    raise RuntimeError("the agents' networks have diverged: the MPI "
+                                       "reduction did not give every rank the same bits")
+                _save_checkpoint(out, agent, buffer, noise, counters, config)
+    finally:
+        bar.close()
+        env.close()
+        if progress_file is not None:
+            progress_file.close()
+    return out
