@@ -228,5 +228,108 @@ def evaluate(checkpoint: Path, goals: str, threshold: float, no_reinit: bool, ep
 
 
 
+# --- course: release / grade ---
+
+
+@main.group("course")
+def course_group() -> None:
+    """The lesson notebooks: generate lessons/ from solutions/, grade students' notebooks."""
+
+
+@course_group.command("release")
+@click.option("--solutions", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="Solution notebooks [the repository's solutions/].")
+@click.option("--lessons", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Folder to write the student notebooks to [the repository's lessons/].")
+@click.option("--check", is_flag=True,
+              help="Write nothing; fail if lessons/ differs from what release would write.")
+def course_release(solutions: Path | None, lessons: Path | None, check: bool) -> None:
+    """Write lessons/ from solutions/: solutions replaced by NotImplementedError, no outputs."""
+    from dlo_course import course as course_lib
+
+    solutions = solutions or course_lib.SOLUTIONS_DIR
+    lessons = lessons or course_lib.LESSONS_DIR
+    try:
+        result = course_lib.release(solutions, lessons, check=check)
+    except (ValueError, FileNotFoundError) as err:
+        raise click.ClickException(str(err)) from err
+    if check:
+        if result:
+            raise click.ClickException("lessons are out of date; run `dlo-course course "
+                                       "release`:\n  " + "\n  ".join(result))
+        click.echo(f"{lessons} is up to date with {solutions}")
+        return
+    n = sum(1 for e in course_lib.exercises(solutions))
+    click.echo(f"wrote {len(result)} notebooks ({n} exercises) to {lessons}")
+
+
+@course_group.command("grade")
+@click.argument("submissions", type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
+              default=Path("grades.csv"), show_default=True, help="CSV file of the grades.")
+@click.option("--tests", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="Grading tests [the repository's tests/grading].")
+@click.option("--timeout", type=float, default=1800, show_default=True,
+              help="Seconds allowed for one student's whole grading run.")
+def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: float) -> None:
+    """Grade SUBMISSIONS/<student>/ notebook folders; one CSV row of points per student."""
+    from dlo_course import course as course_lib
+
+    try:
+        rows = course_lib.grade(submissions, out, tests or course_lib.GRADING_TESTS_DIR,
+                                timeout=timeout)
+    except (ValueError, FileNotFoundError) as err:
+        raise click.ClickException(str(err)) from err
+    for row in rows:
+        note = f"  ({row['error']})" if row["error"] else ""
+        click.echo(f"{row['student']}: {row['total']:g} / {row['max_total']:g}{note}")
+    click.echo(f"wrote {out}")
+
+
+@main.command()
+@click.option("--out", type=click.Path(file_okay=False, path_type=Path),
+              default=Path("reports/reproduction"), show_default=True)
+@click.option("--checkpoints", type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Folder with nodes2/ nodes4/ nodes6/ run directories "
+                   "(default: the shipped data/checkpoints).")
+@click.option("--episodes", type=click.IntRange(min=1), default=None,
+              help="Test episodes per setting (default 20, about 15 min on 2 cores; "
+                   "the paper: 1000).")
+@click.option("--max-steps", type=click.IntRange(min=1), default=None,
+              help="Actions per test episode (default 30, as in the paper).")
+@click.option("--train", "retrain", is_flag=True,
+              help="Train the three agents with --preset first, instead of using checkpoints.")
+@click.option("--preset", "preset_name", type=click.Choice(["smoke", "laptop", "paper"]),
+              default=None, help="Trainer preset for --train. 'smoke' alone runs the whole "
+                                 "pipeline in minutes (tiny training, 2 episodes per setting).")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--time-mode", type=click.Choice(["code", "paper"]), default="code",
+              show_default=True)
+def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_steps: int | None,
+              retrain: bool, preset_name: str | None, seed: int, time_mode: str) -> None:
+    """Regenerate the paper's Table I and Figs. 4-5 beside the published numbers."""
+    from dlo_course.evaluation import CheckpointError
+    from dlo_course.reproduce import reproduce as run
+
+    smoke = preset_name == "smoke"
+    if preset_name is not None and not (retrain or smoke):
+        raise click.UsageError("--preset chooses how to retrain: add --train "
+                               "(only 'smoke' implies it)")
+    if retrain and preset_name is None:
+        raise click.UsageError("--train needs --preset smoke|laptop|paper")
+    if retrain and checkpoints is not None:
+        raise click.UsageError("--train writes new checkpoints; drop --checkpoints")
+    episodes = episodes or (2 if smoke else 20)
+    max_steps = max_steps or (10 if smoke else 30)
+    try:
+        report = run(out, checkpoints=checkpoints, episodes=episodes, max_steps=max_steps,
+                     seed=seed, train_preset=preset_name if (retrain or smoke) else None,
+                     time_mode=time_mode)
+    except (CheckpointError, FileNotFoundError) as err:
+        raise click.ClickException(str(err)) from None
+    if report is not None:
+        click.echo(f"wrote {report} and the tables and figures beside it")
+
+
 if __name__ == "__main__":
     main()

@@ -1,0 +1,293 @@
+"""``dlo-course reproduce``: the paper's Table I and figures, regenerated beside the paper's.
+
+By default it evaluates the shipped agents (``data/checkpoints/nodes{2,4,6}``) on all 24
+settings of Table I with a reduced number of episodes per setting, and writes into ``--out``:
+
+* ``table1.csv`` and ``table1.md``: our numbers, the paper's (``data/paper/table1.csv``) and
+  the differences, with the 95% interval of our done %;
+* ``fig4_learning_curves.png``: the training curves of the agents (the paper's Fig. 4);
+* ``fig5_deformation.png``: the robot deforming the rod to a goal from the large database
+  that lies outside the training box (the paper's Fig. 5);
+* ``report.md``: which settings produced the numbers (time per action, gradient reduction,
+  training budget, episodes per cell).
+
+Runs on every MPI rank: under ``mpiexec -n N`` the episodes of each setting are split over the
+ranks (see :mod:`dlo_course.evaluation`).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from dlo_course.paths import CHECKPOINT_DIR, DATA_DIR
+
+PAPER_TABLE = DATA_DIR / "paper" / "table1.csv"
+NODES = (2, 4, 6)
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One setting (row) of Table I."""
+
+    reinit: str  # "with" or "without"
+    nodes: int
+    database: str  # "small" or "large"
+    threshold: float
+
+    @property
+    def key(self) -> tuple:
+        return (self.reinit, self.nodes, self.database, round(self.threshold, 4))
+
+
+def table1_cells() -> list[Cell]:
+    """The 24 settings in the paper's order."""
+    return [Cell(r, n, db, thr) for r in ("with", "without") for n in NODES
+            for db in ("small", "large") for thr in (0.05, 0.03)]
+
+
+def read_paper_table(path: Path = PAPER_TABLE) -> dict[tuple, dict[str, float]]:
+    """The paper's Table I, keyed like :attr:`Cell.key`."""
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"the paper's Table I is missing: {path}")
+    table = {}
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            cell = Cell(row["reinit"], int(row["nodes"]), row["database"], float(row["threshold"]))
+            table[cell.key] = {k: float(row[k]) for k in
+                               ("done_percent", "mean_distance", "std_distance", "best_distance")}
+    return table
+
+
+def checkpoint_dir(root: Path, n_nodes: int) -> Path:
+    return Path(root) / f"nodes{n_nodes}"
+
+
+def train_agents(preset_name: str, out: Path, seed: int = 0) -> Path:
+    """Train one agent per node count with a trainer preset; returns the checkpoint root."""
+    from dlo_course import mpi
+    from dlo_course.trainer import preset, train
+
+    root = Path(out) / "checkpoints"
+    for n in NODES:
+        config = preset(preset_name, env_kwargs={"n_nodes": n}, seed=seed,
+                        out_dir=str(checkpoint_dir(root, n)))
+        train(config, resume=True, progress=mpi.is_root())
+    return root
+
+
+def evaluate_cells(checkpoints: Path, episodes: int, max_steps: int, seed: int,
+                   time_mode: str = "code", cells: list[Cell] | None = None) -> list[dict]:
+    """Evaluate every cell; on rank 0 returns one dict per cell, elsewhere an empty list."""
+    from tqdm.auto import tqdm
+
+    from dlo_course import mpi
+    from dlo_course.evaluation import evaluate
+
+    cells = cells or table1_cells()
+    rows = []
+    for cell in tqdm(cells, desc="Table I settings", unit="setting", disable=not mpi.is_root()):
+        summary, _ = evaluate(checkpoint_dir(checkpoints, cell.nodes), goals=cell.database,
+                              threshold=cell.threshold, reinitialize=cell.reinit == "with",
+                              episodes=episodes, max_steps=max_steps, seed=seed,
+                              n_nodes=cell.nodes, time_mode=time_mode, show_progress=False)
+        if summary is not None:
+            rows.append({"cell": cell, **summary.as_dict()})
+    return rows
+
+
+def write_table(rows: list[dict], paper: dict, out: Path) -> tuple[Path, Path]:
+    """``table1.csv`` and ``table1.md``: ours, the paper's and the difference per setting."""
+    out.mkdir(parents=True, exist_ok=True)
+    fields = ["reinit", "nodes", "database", "threshold", "episodes",
+              "done_percent", "done_ci_low", "done_ci_high", "paper_done_percent", "done_diff",
+              "mean_distance", "std_distance", "paper_mean_distance", "paper_std_distance",
+              "mean_diff", "best_distance", "paper_best_distance", "best_diff"]
+    csv_path, md_path = out / "table1.csv", out / "table1.md"
+    lines = [
+        "| reinit | nodes | db | thr | episodes | done % (95% CI) | paper done % | Δ done | "
+        "mean ± σ (m) | paper mean ± σ (m) | best (m) | paper best (m) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    with open(csv_path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        for row in rows:
+            cell = row["cell"]
+            ref = paper[cell.key]
+            record = {
+                "reinit": cell.reinit, "nodes": cell.nodes, "database": cell.database,
+                "threshold": cell.threshold, "episodes": row["episodes"],
+                "done_percent": row["done_percent"], "done_ci_low": row["done_ci_low"],
+                "done_ci_high": row["done_ci_high"],
+                "paper_done_percent": ref["done_percent"],
+                "done_diff": row["done_percent"] - ref["done_percent"],
+                "mean_distance": row["mean_distance"], "std_distance": row["std_distance"],
+                "paper_mean_distance": ref["mean_distance"],
+                "paper_std_distance": ref["std_distance"],
+                "mean_diff": row["mean_distance"] - ref["mean_distance"],
+                "best_distance": row["best_distance"],
+                "paper_best_distance": ref["best_distance"],
+                "best_diff": row["best_distance"] - ref["best_distance"],
+            }
+            writer.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v)
+                             for k, v in record.items()})
+            lines.append(
+                f"| {cell.reinit} | {cell.nodes} | {cell.database} | {cell.threshold} | "
+                f"{row['episodes']} | {row['done_percent']:.1f} ({row['done_ci_low']:.1f}–"
+                f"{row['done_ci_high']:.1f}) | {ref['done_percent']:.1f} | "
+                f"{record['done_diff']:+.1f} | {row['mean_distance']:.5f} ± "
+                f"{row['std_distance']:.5f} | {ref['mean_distance']:.5f} ± "
+                f"{ref['std_distance']:.5f} | {row['best_distance']:.5f} | "
+                f"{ref['best_distance']:.5f} |")
+    md_path.write_text("\n".join(lines) + "\n")
+    return csv_path, md_path
+
+
+def training_record(checkpoints: Path, n_nodes: int) -> dict:
+    """What an agent's training cost: ranks, episodes, transitions, wall time, seed, commit."""
+    folder = checkpoint_dir(checkpoints, n_nodes)
+    record_file = folder / "record.json"
+    if record_file.is_file():
+        return json.loads(record_file.read_text())
+    record = {}
+    config_file = folder / "config.json"
+    if config_file.is_file():
+        config = json.loads(config_file.read_text())
+        record.update(ranks=config.get("n_agents"), seed=config["config"].get("seed"),
+                      reduce=config["config"].get("reduce"))
+    progress = folder / "progress.csv"
+    if progress.is_file():
+        with open(progress, newline="") as f:
+            last = list(csv.DictReader(f))[-1:]
+        if last:
+            record.update(episodes_per_agent=int(last[0]["episode"]),
+                          transitions=int(last[0]["transitions"]),
+                          wall_time_h=float(last[0]["wall_time"]) / 3600)
+    return record
+
+
+def plot_deformation(checkpoints: Path, out: Path, n_nodes: int = 4, seed: int = 0,
+                     max_steps: int = 30, time_mode: str = "code") -> Path:
+    """The paper's Fig. 5: the agent deforms the rod to a goal outside its training box."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import torch
+
+    from dlo_course.database import BOXES, load_database
+    from dlo_course.env import DLOShapeEnv
+    from dlo_course.evaluation import load_actor
+    from dlo_course.mesh import selected_nodes
+    from dlo_course.plots import plot_rod
+
+    actor, n_nodes = load_actor(checkpoint_dir(checkpoints, n_nodes), n_nodes)
+    large = load_database("large")
+    offsets = large.tip - large.meta["initial_tip"]
+    small = BOXES["small"]
+    outside = np.flatnonzero(np.any((offsets < np.array(small.low) - 1e-9)
+                                    | (offsets > np.array(small.high) + 1e-9), axis=1))
+    goal_index = int(np.random.default_rng(seed).choice(outside))
+    env = DLOShapeEnv(n_nodes=n_nodes, goals=large.goals(n_nodes), render_mode="rgb_array",
+                      time_mode=time_mode)
+    ids = list(selected_nodes(n_nodes))
+    try:
+        obs, info = env.reset(options={"goal_index": goal_index})
+        start_nodes, start_image = env.scene.node_positions(), env.render()
+        steps = 0
+        for steps in range(1, max_steps + 1):
+            with torch.no_grad():
+                action = actor(torch.as_tensor(obs[None]))[0].numpy()
+            obs, _, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                break
+        end_nodes, end_image = env.scene.node_positions(), env.render()
+    finally:
+        env.close()
+
+    fig = plt.figure(figsize=(14, 4.8))
+    ax = fig.add_subplot(1, 3, 1)
+    ax.imshow(start_image)
+    ax.set_title("start (blue: P_c, red: P_d)")
+    ax.axis("off")
+    ax = fig.add_subplot(1, 3, 2)
+    ax.imshow(end_image)
+    ax.set_title(f"after {steps} actions: mean distance {info['distance']:.3f} m")
+    ax.axis("off")
+    ax = fig.add_subplot(1, 3, 3, projection="3d")
+    plot_rod(ax, start_nodes, color="grey", label="initial shape")
+    plot_rod(ax, end_nodes, selected=ids, goal=large.goals(n_nodes)[goal_index],
+             label="final shape")
+    ax.set_title(f"{n_nodes} nodes, large-database goal {goal_index}\n"
+                 f"(outside the training box)")
+    ax.legend(loc="upper left")
+    fig.tight_layout()
+    path = Path(out) / "fig5_deformation.png"
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 20,
+              max_steps: int = 30, seed: int = 0, train_preset: str | None = None,
+              time_mode: str = "code") -> Path | None:
+    """Regenerate Table I and Figs. 4-5 (see the module docstring); returns the report path
+    on rank 0."""
+    from dlo_course import mpi
+    from dlo_course.learning_curves import plot_learning_curves
+
+    out = Path(out)
+    paper = read_paper_table()
+    if train_preset is not None:
+        checkpoints = train_agents(train_preset, out, seed)
+    checkpoints = Path(checkpoints or CHECKPOINT_DIR)
+    rows = evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode)
+    if not mpi.is_root():
+        return None
+    csv_path, md_path = write_table(rows, paper, out)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    runs = [checkpoint_dir(checkpoints, n) for n in NODES]
+    fig = plot_learning_curves(runs, out=out / "fig4_learning_curves.png",
+                               labels=[f"{n} nodes" for n in NODES])
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    fig5 = plot_deformation(checkpoints, out, seed=seed, max_steps=max_steps,
+                            time_mode=time_mode)
+    records = {n: training_record(checkpoints, n) for n in NODES}
+    lines = [
+        "# Table I, reproduced",
+        "",
+        f"Episodes per setting: {episodes} (the paper: 1000), at most {max_steps} actions each, "
+        f"goal draw seed {seed}, {mpi.size()} MPI rank(s).",
+        f"Time per action: `{time_mode}` ("
+        + ("3 ms of physics per action, as in the authors' code" if time_mode == "code"
+           else "0.06 s of physics per action, as in the paper's text") + ").",
+        "",
+        "## Training budgets (the paper: 32 agents x 63 episodes x 300 steps = 604 800 "
+        "transitions, gradients summed, under 3.5 h on 32 cores)",
+        "",
+        "| nodes | ranks | episodes per agent | transitions | wall time (h) | gradient "
+        "reduction | seed | commit |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for n, rec in records.items():
+        wall = rec.get("wall_time_h")
+        lines.append(f"| {n} | {rec.get('ranks', '?')} | {rec.get('episodes_per_agent', '?')} | "
+                     f"{rec.get('transitions', '?')} | "
+                     f"{'?' if wall is None else f'{wall:.2f}'} | "
+                     f"{rec.get('reduce', '?')} | {rec.get('seed', '?')} | "
+                     f"{rec.get('commit', '?')} |")
+    lines += ["", "## Table I: ours beside the paper's", "", md_path.read_text(),
+              f"Files: `{csv_path.name}`, `{md_path.name}`, `fig4_learning_curves.png`, "
+              f"`{fig5.name}`."]
+    report = out / "report.md"
+    report.write_text("\n".join(lines) + "\n")
+    return report

@@ -1,0 +1,73 @@
+"""The reproduction: Table I's layout, the report, and the whole pipeline in its smoke size."""
+
+import csv
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from dlo_course.cli import main
+from dlo_course.reproduce import read_paper_table, table1_cells, write_table
+
+REPO = Path(__file__).resolve().parent.parent
+BIN = Path(sys.executable).parent
+
+
+def test_the_24_settings_match_the_papers_table():
+    cells = table1_cells()
+    paper = read_paper_table()
+    assert len(cells) == 24 == len(paper)
+    assert {c.key for c in cells} == set(paper)
+    assert paper[("with", 4, "large", 0.05)]["done_percent"] == 97.2
+    assert paper[("without", 6, "small", 0.05)]["mean_distance"] == 0.08669
+
+
+def test_table_sets_our_numbers_beside_the_papers(tmp_path):
+    paper = read_paper_table()
+    rows = [{"cell": c, "episodes": 10, "done_percent": 90.0, "done_ci_low": 59.6,
+             "done_ci_high": 98.2, "mean_distance": 0.04, "std_distance": 0.01,
+             "best_distance": 0.02, "mean_steps": 8.0} for c in table1_cells()]
+    csv_path, md_path = write_table(rows, paper, tmp_path)
+    with open(csv_path, newline="") as f:
+        table = list(csv.DictReader(f))
+    assert len(table) == 24
+    first = table[0]  # with, 2 nodes, small, 0.05: the paper has 99.5 %
+    assert float(first["paper_done_percent"]) == 99.5
+    assert float(first["done_diff"]) == pytest.approx(90.0 - 99.5)
+    assert float(first["mean_diff"]) == pytest.approx(0.04 - 0.03010)
+    assert md_path.read_text().count("\n") == 26  # header, rule, 24 settings
+
+
+def test_reproduce_flag_errors():
+    runner = CliRunner()
+    result = runner.invoke(main, ["reproduce", "--preset", "laptop"])
+    assert result.exit_code != 0 and "--train" in result.output
+    result = runner.invoke(main, ["reproduce", "--train"])
+    assert result.exit_code != 0 and "--preset" in result.output
+    result = runner.invoke(main, ["reproduce", "--checkpoints", "/nonexistent", "--episodes", "1"])
+    assert result.exit_code != 0 and "no checkpoint" in result.output
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+def test_cluster_script_runs_the_whole_pipeline_with_the_smoke_preset(tmp_path):
+    """The SLURM script, outside SLURM, with the plain `mpiexec -hosts` launcher: smoke
+    training of the three agents on 2 ranks, then the 24 settings split over the ranks."""
+    out = tmp_path / "paper"
+    env = dict(os.environ, VENV=str(BIN.parent), PRESET="smoke", NTASKS="2", EPISODES="2",
+               OUT=str(out), LAUNCH=f"{BIN / 'mpiexec'} -hosts localhost,localhost",
+               PATH=f"{BIN}:{os.environ['PATH']}")
+    subprocess.run(["bash", str(REPO / "scripts" / "cluster" / "paper.sbatch")], env=env,
+                   check=True, timeout=900, cwd=tmp_path, capture_output=True)
+    report = out / "report"
+    with open(report / "table1.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 24 and all(int(r["episodes"]) == 2 for r in rows)
+    for name in ("table1.md", "report.md", "fig4_learning_curves.png", "fig5_deformation.png"):
+        assert (report / name).stat().st_size > 0
+    for n in (2, 4, 6):
+        assert (out / f"nodes{n}" / "actor.pt").is_file()
+    assert "| 2 | 2 | 2 |" in (report / "report.md").read_text()  # ranks and episodes per agent
