@@ -247,3 +247,20 @@ def test_two_environments_in_one_process_are_independent(make_env, far_goals):
     untouched = b.scene.node_positions()
     a.step([1.0, 0.0, 0.0])
     np.testing.assert_array_equal(b.scene.node_positions(), untouched)
+
+
+def test_paper_time_is_twenty_code_steps_per_action():
+    from dlo_course.simulation import RodScene
+
+    code, paper = RodScene(SimParams()), RodScene(SimParams(time_mode="paper"))
+    try:
+        target = code.initial_tip + [0.0, 0.03, -0.02]
+        code.move_tip_to(target)  # one 3 ms action ...
+        for _ in range(19):
+            code.advance()  # ... and 19 more 3 ms steps with the same motor targets
+        paper.move_tip_to(target)  # one 0.06 s action
+        np.testing.assert_array_equal(code.node_positions(), paper.node_positions())
+        assert paper.timings.actions == 1 and code.timings.actions == 20
+    finally:
+        code.close()
+        paper.close()
