@@ -283,7 +283,8 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
     for row in rows:
         note = f"  ({row['error']})" if row["error"] else ""
         click.echo(f"{row['student']}: {row['total']:g} / {row['max_total']:g}{note}")
-    click.echo(f"wrote {out}")
+    logs = out.parent / f"{out.stem}_logs"
+    click.echo(f"wrote {out} (the grader's output for each student: {logs})")
 
 
 @main.command()

@@ -1,0 +1,93 @@
+"""Grading: lesson 9, training on the rod (reference: dlo_course.trainer.run_episode).
+
+The library's run_episode is run with updates switched off (a huge warm-up) and an "agent"
+whose act() is the test's policy, on environments much faster than the rod.
+"""
+
+import math
+from types import SimpleNamespace
+
+import gymnasium
+import numpy as np
+import pytest
+
+from dlo_course.replay_buffer import ReplayBuffer
+from dlo_course.trainer import TrainConfig, run_episode
+
+pytestmark = pytest.mark.notebook("09_training_ddpg_on_the_dlo")
+
+FIELDS = ("obs", "act", "rew", "next_obs", "done")
+
+
+class ReachAt(gymnasium.Env):
+    """1-D toy: terminates with success at step `at`, truncates at step `limit`."""
+
+    observation_space = gymnasium.spaces.Box(-10.0, 10.0, (2,), np.float32)
+    action_space = gymnasium.spaces.Box(-1.0, 1.0, (3,), np.float32)
+
+    def __init__(self, at=3, limit=None):
+        self.at, self.limit = at, limit
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        obs = self.np_random.normal(size=2).astype(np.float32)
+        return obs, {"distance": 1.0, "is_success": False}
+
+    def step(self, action):
+        self.t += 1
+        done = self.t == self.at
+        obs = np.array([self.t / 10, float(np.sum(action))], np.float32)
+        info = {"distance": 0.1 / self.t, "is_success": done}
+        truncated = self.limit is not None and self.t >= self.limit
+        return obs, -0.1 / self.t + float(action[0]), done, truncated, info
+
+
+def policy_for(env, seed):
+    rng = np.random.default_rng(seed)
+    return lambda obs: rng.uniform(env.action_space.low, env.action_space.high).astype(np.float32)
+
+
+def library_episode(make_env, max_steps, seed):
+    env = make_env()
+    buffer = ReplayBuffer(env.observation_space.shape[0], env.action_space.shape[0], 500, seed=0)
+    policy = policy_for(env, seed)
+    agent = SimpleNamespace(act=lambda obs, noise: policy(obs))
+    noise = SimpleNamespace(reset=lambda: None)
+    config = TrainConfig(env_id="unused", env_kwargs={}, steps_per_episode=max_steps,
+                         warmup=10**9)
+    result = run_episode(env, agent, buffer, noise, config, seed, None)
+    return result, buffer
+
+
+@pytest.mark.exercise("play_episode", points=2)
+def test_play_episode(exercise):
+    cases = [(lambda: ReachAt(3), 10), (lambda: ReachAt(3), 2), (lambda: ReachAt(50, limit=4), 10),
+             (lambda: gymnasium.make("Pendulum-v1"), 12)]
+    for k, (make_env, max_steps) in enumerate(cases):
+        expected, ref_buffer = library_episode(make_env, max_steps, seed=k)
+        env = make_env()
+        buffer = ReplayBuffer(env.observation_space.shape[0], env.action_space.shape[0], 500,
+                              seed=0)
+        got = exercise(env, policy_for(env, k), buffer, max_steps, k)
+        assert len(buffer) == len(ref_buffer), f"case {k}: {len(buffer)} transitions stored, " \
+                                               f"expected {len(ref_buffer)}"
+        for name in FIELDS:
+            np.testing.assert_allclose(getattr(buffer, name), getattr(ref_buffer, name),
+                                       rtol=1e-6, err_msg=f"case {k}: stored {name}")
+        for key in ("reward", "length", "distance", "success"):
+            assert key in got, f"missing {key!r}"
+            if math.isnan(expected[key]):
+                assert math.isnan(float(got[key])), f"case {k}: {key} should be NaN"
+            else:
+                assert float(got[key]) == pytest.approx(expected[key], rel=1e-6), f"case {k}: {key}"
+
+
+@pytest.mark.exercise("updates_can_start", points=1)
+def test_updates_can_start(exercise):
+    # trainer.run_episode: warmup = config.warmup or batch_size; min over ranks >= warmup
+    cases = [(([130, 127, 200], 128, None), False), (([130, 128, 200], 128, None), True),
+             (([5], 4, None), True), (([10, 12], 128, 10), True), (([9, 12], 128, 10), False),
+             (([0, 0], 1, None), False)]
+    for args, expected in cases:
+        assert bool(exercise(*args)) == expected, f"updates_can_start{args}"

@@ -1,0 +1,250 @@
+"""The course's notebooks: release, grading, and every solution executed end to end.
+
+The grader itself (tests/grading) is only collected when targeted; here it runs as a
+subprocess, on the solutions (everything passes) and on the released lessons (everything
+fails), and on made-up student submissions through ``dlo-course course grade``.
+"""
+
+from __future__ import annotations
+
+import copy
+import csv
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from dlo_course import course
+from dlo_course.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+SOLUTIONS, LESSONS = REPO / "solutions", REPO / "lessons"
+NOTEBOOKS = course.notebooks_in(SOLUTIONS)
+
+
+def run_grader(notebooks: Path, tmp_path: Path, timeout_per_exercise: float = 60) -> dict:
+    out = tmp_path / f"grades_{notebooks.name}.json"
+    env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT=str(timeout_per_exercise))
+    proc = subprocess.run(course.grading_command(notebooks, json_out=out), cwd=REPO, env=env,
+                          capture_output=True, text=True, timeout=600)
+    assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    report = json.loads(out.read_text())
+    report["returncode"], report["output"] = proc.returncode, proc.stdout + proc.stderr
+    return report
+
+
+def catalog() -> dict[str, int]:
+    return {e["exercise"]: e["points"] for e in course.exercises(SOLUTIONS)}
+
+
+# ------------------------------------------------------------------ the course's shape
+
+
+def test_course_has_enough_lessons_and_exercises():
+    assert len(NOTEBOOKS) >= 10
+    assert len(catalog()) >= 20
+    for required in ("bellman_target", "critic_loss", "policy_loss", "polyak_update",
+                     "mean_node_distance", "reduce_gradients"):
+        assert required in catalog()
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_each_lesson_has_goals_exercises_summary_and_reading(path):
+    nb = course.read_notebook(path)
+    markdown = [course.cell_source(c) for c in nb["cells"] if c["cell_type"] == "markdown"]
+    text = "\n".join(markdown)
+    assert markdown[0].startswith("# Lesson"), "a lesson starts with its title"
+    assert "Learning goals" in markdown[0]
+    assert "## Summary" in text and "## Further reading" in text
+    setup = [c for c in nb["cells"] if course.is_setup(c)]
+    exercises = [c for c in nb["cells"] if course.exercise_info(c)]
+    assert setup and exercises
+    for cell in exercises:  # metadata and the visible first-line comment agree
+        info = course.exercise_info(cell)
+        first = course.cell_source(cell).split("\n", 1)[0]
+        assert first.startswith(f"# exercise: {info['exercise']} ({info['points']} point")
+
+
+# ------------------------------------------------------------------------ release
+
+
+def test_lessons_are_exactly_what_release_generates(tmp_path):
+    """Drift test: lessons/ must be regenerated (`dlo-course course release`) after any edit
+    of solutions/."""
+    assert course.release(SOLUTIONS, LESSONS, check=True) == []
+    written = course.release(SOLUTIONS, tmp_path)
+    assert written == [p.name for p in NOTEBOOKS]
+    for name in written:
+        assert (tmp_path / name).read_bytes() == (LESSONS / name).read_bytes()
+    result = CliRunner().invoke(main, ["course", "release", "--check"])
+    assert result.exit_code == 0, result.output
+
+
+@pytest.mark.parametrize("folder", [SOLUTIONS, LESSONS], ids=["solutions", "lessons"])
+def test_notebooks_are_committed_without_outputs(folder):
+    for path in course.notebooks_in(folder):
+        nb = course.read_notebook(path)
+        assert not course.has_outputs(nb), f"{path.name} has outputs: clear them before committing"
+        assert path.read_text(encoding="utf-8") == course.notebook_json(nb), \
+            f"{path.name} is not in Jupyter's JSON layout"
+
+
+@pytest.mark.parametrize("folder", [SOLUTIONS, LESSONS], ids=["solutions", "lessons"])
+def test_notebooks_are_valid_nbformat(folder):
+    nbformat = pytest.importorskip("nbformat")
+    for path in course.notebooks_in(folder):
+        nbformat.validate(nbformat.read(path, as_version=4))
+
+
+def test_lessons_contain_no_solutions():
+    for path in course.notebooks_in(LESSONS):
+        for cell in course.read_notebook(path)["cells"]:
+            source = course.cell_source(cell)
+            assert course.SOLUTION_BEGIN not in source and course.SOLUTION_END not in source
+            if course.exercise_info(cell):
+                assert "raise NotImplementedError()" in source
+
+
+def test_strip_solutions_keeps_signature_docstring_and_indentation():
+    source = (
+        'def f(x):\n'
+        '    """Doc."""\n'
+        '    ### BEGIN SOLUTION\n'
+        '    y = x + 1\n'
+        '    return y\n'
+        '    ### END SOLUTION\n'
+        '\n'
+        'class C:\n'
+        '    def g(self):\n'
+        '        ### BEGIN SOLUTION\n'
+        '        return 2\n'
+        '        ### END SOLUTION')
+    stripped = course.strip_solutions(source)
+    assert stripped == (
+        'def f(x):\n'
+        '    """Doc."""\n'
+        '    # YOUR CODE HERE\n'
+        '    raise NotImplementedError()\n'
+        '\n'
+        'class C:\n'
+        '    def g(self):\n'
+        '        # YOUR CODE HERE\n'
+        '        raise NotImplementedError()')
+    compile(stripped, "<stripped>", "exec")
+    for broken in ("### BEGIN SOLUTION\nx", "### END SOLUTION", "### BEGIN SOLUTION\n"
+                   "### BEGIN SOLUTION\n### END SOLUTION"):
+        with pytest.raises(ValueError):
+            course.strip_solutions(broken)
+
+
+def test_release_rejects_a_malformed_exercise(tmp_path):
+    nb = course.read_notebook(NOTEBOOKS[0])
+    cell = next(c for c in nb["cells"] if course.exercise_info(c))
+    cell["source"] = [line for line in cell["source"] if "SOLUTION" not in line]
+    course.write_notebook(nb, tmp_path / "solutions" / NOTEBOOKS[0].name)
+    with pytest.raises(ValueError, match="no solution block"):
+        course.release(tmp_path / "solutions", tmp_path / "lessons")
+
+
+# ------------------------------------------------------------------------ grading
+
+
+def test_grader_gives_full_points_to_the_solutions(tmp_path):
+    report = run_grader(SOLUTIONS, tmp_path)
+    assert report["returncode"] == 0, report["output"][-5000:]
+    graded = {e["exercise"]: e for e in report["exercises"]}
+    assert {name: e["points"] for name, e in graded.items()} == catalog(), \
+        "every exercise needs a grading test, with the points of its notebook metadata"
+    failed = [name for name, e in graded.items() if e["outcome"] != "passed"]
+    assert not failed, report["output"][-5000:]
+    assert report["total"] == report["max_total"] == sum(catalog().values())
+    assert "TOTAL" in report["output"]
+
+
+def test_grader_fails_every_exercise_of_the_untouched_lessons(tmp_path):
+    report = run_grader(LESSONS, tmp_path)
+    assert report["returncode"] != 0
+    assert {e["exercise"] for e in report["exercises"]} == set(catalog())
+    passed = [e["exercise"] for e in report["exercises"] if e["outcome"] == "passed"]
+    assert not passed, f"these exercises pass without an answer: {passed}"
+    assert report["total"] == 0
+
+
+def make_submissions(root: Path) -> None:
+    """alice: the solutions. bob: one endless loop, one syntax error, an exercise cell that
+    lost its metadata (kept its comment), a missing notebook, a crashing answer."""
+    alice, bob = root / "alice", root / "bob"
+    alice.mkdir(parents=True)
+    bob.mkdir(parents=True)
+    for path in NOTEBOOKS:
+        (alice / path.name).write_bytes(path.read_bytes())
+        if path.stem.startswith("02_"):
+            continue  # bob did not hand in lesson 2
+        nb = course.read_notebook(path)
+        for cell in nb["cells"]:
+            info = course.exercise_info(cell)
+            if info is None:
+                continue
+            source = course.cell_source(cell)
+            if info["exercise"] == "bellman_target":
+                source = source.replace("### BEGIN SOLUTION", "while True:\n        pass")
+            elif info["exercise"] == "discounted_return":
+                source = source + "\n    def (broken syntax\n"
+            elif info["exercise"] == "lame_parameters":
+                cell["metadata"].pop(course.METADATA_KEY)  # only the comment is left
+            elif info["exercise"] == "critic_loss":
+                source = source.replace("### BEGIN SOLUTION", "return 1 / 0")
+            cell["source"] = source.splitlines(keepends=True)
+        course.write_notebook(nb, bob / path.name)
+
+
+def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monkeypatch):
+    make_submissions(tmp_path / "submissions")
+    monkeypatch.setenv("DLO_COURSE_GRADING_TIMEOUT", "5")
+    out = tmp_path / "grades.csv"
+    started = time.perf_counter()
+    result = CliRunner().invoke(main, ["course", "grade", str(tmp_path / "submissions"),
+                                       "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    assert time.perf_counter() - started < 300
+    with out.open(newline="") as f:
+        rows = {row["student"]: row for row in csv.DictReader(f)}
+    points = catalog()
+    assert list(rows) == ["alice", "bob"]
+    alice = rows["alice"]
+    assert float(alice["total"]) == float(alice["max_total"]) == sum(points.values())
+    bob = rows["bob"]
+    lost = {"bellman_target", "discounted_return", "critic_loss", "stored_done", "RingBuffer"}
+    for name, value in points.items():
+        expected = 0 if name in lost else value
+        assert float(bob[name]) == expected, f"bob's {name}: {bob[name]}, expected {expected}"
+    assert float(bob["total"]) == sum(points.values()) - sum(points[n] for n in lost)
+
+
+# ---------------------------------------------------------------- running the notebooks
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
+def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path, monkeypatch):
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    pytest.importorskip("ipykernel")
+    missing = course.missing_data(course.read_notebook(path))
+    if missing:
+        pytest.skip(f"needs {', '.join(str(m) for m in missing)} (not generated yet)")
+    monkeypatch.setenv("DLO_COURSE_FAST", "1")
+    monkeypatch.setenv("DLO_COURSE_OUTPUT", str(tmp_path / "output"))
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    nb = nbformat.read(path, as_version=4)
+    client = nbclient.NotebookClient(nb, timeout=240, kernel_name="python3",
+                                     resources={"metadata": {"path": str(tmp_path)}})
+    started = time.perf_counter()
+    client.execute()
+    assert time.perf_counter() - started < 240, f"{path.name} is too slow on the fast budget"
