@@ -39,6 +39,11 @@ class Box:
     def size(self) -> np.ndarray:
         return np.subtract(self.high, self.low)
 
+    def contains(self, offsets: np.ndarray) -> np.ndarray:
+        """(N,) bool: which of the (N, 3) tip offsets lie in the box, borders included."""
+        offsets = np.asarray(offsets, dtype=np.float64)
+        return np.all((offsets >= self.low) & (offsets <= self.high), axis=-1)
+
     @property
     def expected_count(self) -> int:
         nx, ny, nz = self.divisions

@@ -162,8 +162,6 @@ def load_goals(source: str | Path | np.ndarray, n_nodes: int) -> np.ndarray:
     if isinstance(source, np.ndarray):
         return DLOShapeEnv._load_goals(source, n_nodes)
     path = Path(source)
-    if str(source) in ("small", "large"):
-        return load_database(str(source)).goals(n_nodes)
     if path.suffix == ".npy":
         if not path.is_file():
             raise FileNotFoundError(f"no goal file at {path}")
@@ -181,6 +179,29 @@ def goal_schedule(n_goals: int, episodes: int, seed: int) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------ protocol
+def play_episode(actor, env, obs: np.ndarray, max_steps: int) -> tuple[bool, int, dict]:
+    """Run the deterministic policy from the environment's current state, just after a reset.
+
+    Args:
+        actor: a module mapping (1, obs_dim) observation tensors to (1, 3) actions.
+        env: the environment, reset; ``obs`` is the observation that reset returned.
+        max_steps: at most this many actions.
+
+    Returns:
+        (done, steps, info): whether the threshold was reached, the actions taken, and the
+        ``info`` of the last step.
+    """
+    import torch
+
+    for steps in range(1, max_steps + 1):
+        with torch.no_grad():
+            action = actor(torch.as_tensor(obs[None]))[0].numpy()
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            return bool(terminated), steps, info
+    return False, max_steps, info
+
+
 def run_episodes(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
                  reinitialize: bool, max_steps: int, progress=None) -> list[EpisodeRecord]:
     """Run the given test episodes in order on one environment (one chain of episodes).
@@ -194,8 +215,6 @@ def run_episodes(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarra
         max_steps: at most this many actions per episode.
         progress: an optional callable called once after each episode.
     """
-    import torch
-
     records = []
     for i, episode in enumerate(episode_ids):
         # The first episode of a chain starts from the initial configuration.
@@ -203,14 +222,7 @@ def run_episodes(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarra
                    "goal_index": int(goal_indices[episode])}
         obs, info = env.reset(options=options)
         start = info["distance"]
-        done, steps = False, 0
-        for steps in range(1, max_steps + 1):
-            with torch.no_grad():
-                action = actor(torch.as_tensor(obs[None]))[0].numpy()
-            obs, _, terminated, truncated, info = env.step(action)
-            if terminated or truncated:
-                done = bool(terminated)
-                break
+        done, steps, info = play_episode(actor, env, obs, max_steps)
         records.append(EpisodeRecord(int(episode), int(goal_indices[episode]), done,
                                      float(info["distance"]), steps, float(start)))
         if progress is not None:

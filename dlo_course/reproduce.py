@@ -150,6 +150,8 @@ def write_table(rows: list[dict], paper: dict, out: Path) -> tuple[Path, Path]:
 
 def training_record(checkpoints: Path, n_nodes: int) -> dict:
     """What an agent's training cost: ranks, episodes, transitions, wall time, seed, commit."""
+    from dlo_course.learning_curves import read_progress
+
     folder = checkpoint_dir(checkpoints, n_nodes)
     record_file = folder / "record.json"
     if record_file.is_file():
@@ -160,14 +162,13 @@ def training_record(checkpoints: Path, n_nodes: int) -> dict:
         config = json.loads(config_file.read_text())
         record.update(ranks=config.get("n_agents"), seed=config["config"].get("seed"),
                       reduce=config["config"].get("reduce"))
-    progress = folder / "progress.csv"
-    if progress.is_file():
-        with open(progress, newline="") as f:
-            last = list(csv.DictReader(f))[-1:]
-        if last:
-            record.update(episodes_per_agent=int(last[0]["episode"]),
-                          transitions=int(last[0]["transitions"]),
-                          wall_time_h=float(last[0]["wall_time"]) / 3600)
+    try:
+        progress = read_progress(folder)
+    except (FileNotFoundError, ValueError):  # no run yet, or not one episode
+        return record
+    record.update(episodes_per_agent=int(progress["episode"][-1]),
+                  transitions=int(progress["transitions"][-1]),
+                  wall_time_h=float(progress["wall_time"][-1]) / 3600)
     return record
 
 
@@ -178,34 +179,26 @@ def plot_deformation(checkpoints: Path, out: Path, n_nodes: int = 4, seed: int =
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import torch
 
     from dlo_course.database import BOXES, load_database
     from dlo_course.env import DLOShapeEnv
-    from dlo_course.evaluation import load_actor
+    from dlo_course.evaluation import load_actor, play_episode
     from dlo_course.mesh import selected_nodes
     from dlo_course.plots import plot_rod
 
     actor, n_nodes = load_actor(checkpoint_dir(checkpoints, n_nodes), n_nodes)
     large = load_database("large")
-    offsets = large.tip - large.meta["initial_tip"]
-    small = BOXES["small"]
-    outside = np.flatnonzero(np.any((offsets < np.array(small.low) - 1e-9)
-                                    | (offsets > np.array(small.high) + 1e-9), axis=1))
+    goals = large.goals(n_nodes)
+    # Goals the sweep recorded with the tip outside the training box.
+    outside = np.flatnonzero(~BOXES["small"].contains(large.meta["offsets"]))
     goal_index = int(np.random.default_rng(seed).choice(outside))
-    env = DLOShapeEnv(n_nodes=n_nodes, goals=large.goals(n_nodes), render_mode="rgb_array",
+    env = DLOShapeEnv(n_nodes=n_nodes, goals=goals, render_mode="rgb_array",
                       time_mode=time_mode)
     ids = list(selected_nodes(n_nodes))
     try:
         obs, info = env.reset(options={"goal_index": goal_index})
         start_nodes, start_image = env.scene.node_positions(), env.render()
-        steps = 0
-        for steps in range(1, max_steps + 1):
-            with torch.no_grad():
-                action = actor(torch.as_tensor(obs[None]))[0].numpy()
-            obs, _, terminated, truncated, info = env.step(action)
-            if terminated or truncated:
-                break
+        _, steps, info = play_episode(actor, env, obs, max_steps)
         end_nodes, end_image = env.scene.node_positions(), env.render()
     finally:
         env.close()
@@ -221,7 +214,7 @@ def plot_deformation(checkpoints: Path, out: Path, n_nodes: int = 4, seed: int =
     ax.axis("off")
     ax = fig.add_subplot(1, 3, 3, projection="3d")
     plot_rod(ax, start_nodes, color="grey", label="initial shape")
-    plot_rod(ax, end_nodes, selected=ids, goal=large.goals(n_nodes)[goal_index],
+    plot_rod(ax, end_nodes, selected=ids, goal=goals[goal_index],
              label="final shape")
     ax.set_title(f"{n_nodes} nodes, large-database goal {goal_index}\n"
                  f"(outside the training box)")

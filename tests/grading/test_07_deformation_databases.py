@@ -42,6 +42,6 @@ def test_inside_box(exercise):
                              [small.low, small.high]])  # corners: borders are inside
     low, high = np.asarray(small.low), np.asarray(small.high)
     got = np.asarray(exercise(points.copy(), low.copy(), high.copy()))
-    expected = np.all((points >= low) & (points <= high), axis=1)
+    expected = small.contains(points)
     assert got.shape == expected.shape
     np.testing.assert_array_equal(got.astype(bool), expected)
