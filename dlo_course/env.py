@@ -82,7 +82,12 @@ class DLOShapeEnv(gym.Env):
         if time_mode is not None:
             params = params.with_(time_mode=time_mode)
         self.params = params
-        self.goal_set = self._load_goals(goals, n_nodes)
+        if isinstance(goals, str):
+            from dlo_course.database import load_database
+
+            self.goal_set = load_database(goals).goals(n_nodes)
+        else:
+            self.goal_set = goal_array(goals, n_nodes)
 
         # Generous finite bounds: positions within 10 m of the origin, tip speed below
         # 100 m/s. Observations are clipped to them, so they always lie in the space.
@@ -99,23 +104,6 @@ class DLOShapeEnv(gym.Env):
         self._last_distance = np.nan
         self._fresh = True  # the scene is in its initial configuration, untouched
         self._broken = False  # the simulation blew up; only a rebuild recovers
-
-    # ------------------------------------------------------------------ goals
-    @staticmethod
-    def _load_goals(goals: str | np.ndarray, n_nodes: int) -> np.ndarray:
-        if isinstance(goals, str):
-            from dlo_course.database import load_database
-
-            return load_database(goals).goals(n_nodes)
-        array = np.asarray(goals, dtype=np.float64)
-        if array.ndim == 2 and array.shape == (n_nodes, 3):
-            array = array[None]  # a single goal
-        if array.ndim != 3 or array.shape[1:] != (n_nodes, 3) or len(array) == 0:
-            raise ValueError(f"goals must have shape (K, {n_nodes}, 3) for n_nodes={n_nodes}, "
-                             f"got {array.shape}")
-        if not np.all(np.isfinite(array)):
-            raise ValueError("goals must be finite")
-        return array
 
     # -------------------------------------------------------------- gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -211,3 +199,20 @@ class DLOShapeEnv(gym.Env):
 def mean_node_distance(current: np.ndarray, desired: np.ndarray) -> float:
     """Mean Euclidean distance (m) between node positions P_c and P_d, both (m, 3)."""
     return float(np.mean(np.linalg.norm(np.asarray(current) - np.asarray(desired), axis=-1)))
+
+
+def goal_array(goals: np.ndarray, n_nodes: int) -> np.ndarray:
+    """Check and return desired positions as a float64 array (K, n_nodes, 3).
+
+    A single goal of shape (n_nodes, 3) becomes (1, n_nodes, 3); anything else of the wrong
+    shape, empty, or non-finite raises ``ValueError``.
+    """
+    array = np.asarray(goals, dtype=np.float64)
+    if array.ndim == 2 and array.shape == (n_nodes, 3):
+        array = array[None]  # a single goal
+    if array.ndim != 3 or array.shape[1:] != (n_nodes, 3) or len(array) == 0:
+        raise ValueError(f"goals must have shape (K, {n_nodes}, 3) for n_nodes={n_nodes}, "
+                         f"got {array.shape}")
+    if not np.all(np.isfinite(array)):
+        raise ValueError("goals must be finite")
+    return array

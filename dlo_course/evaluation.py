@@ -157,19 +157,19 @@ def load_goals(source: str | Path | np.ndarray, n_nodes: int) -> np.ndarray:
     """Goal shapes (K, n_nodes, 3) from "small", "large", a database ``.npz``, a ``.npy``
     array of shape (K, n_nodes, 3), or an ``.npz`` holding such an array as ``goals``."""
     from dlo_course.database import load_database
-    from dlo_course.env import DLOShapeEnv
+    from dlo_course.env import goal_array
 
     if isinstance(source, np.ndarray):
-        return DLOShapeEnv._load_goals(source, n_nodes)
+        return goal_array(source, n_nodes)
     path = Path(source)
     if path.suffix == ".npy":
         if not path.is_file():
             raise FileNotFoundError(f"no goal file at {path}")
-        return DLOShapeEnv._load_goals(np.load(path, allow_pickle=False), n_nodes)
+        return goal_array(np.load(path, allow_pickle=False), n_nodes)
     if path.suffix == ".npz" and path.is_file():
         with np.load(path, allow_pickle=False) as data:
             if "goals" in data.files and "nodes" not in data.files:
-                return DLOShapeEnv._load_goals(data["goals"], n_nodes)
+                return goal_array(data["goals"], n_nodes)
     return load_database(path).goals(n_nodes)
 
 
