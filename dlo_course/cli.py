@@ -104,7 +104,7 @@ def bench_env(steps: int, paper_steps: int, seed: int) -> None:
 
 
 @main.command()
-@click.option("--preset", "preset_name", type=click.Choice(["smoke", "laptop", "paper"]),
+@click.option("--preset", "preset_name", type=click.Choice(["smoke", "laptop", "course", "paper"]),
               default="smoke", show_default=True,
               help="Starting configuration: smoke (seconds, CI), laptop (~1 h on 4 cores), "
                    "paper (32 agents x 63 episodes x 300 steps). The flags below override it.")
@@ -300,7 +300,7 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
               help="Actions per test episode (default 30, as in the paper).")
 @click.option("--train", "retrain", is_flag=True,
               help="Train the three agents with --preset first, instead of using checkpoints.")
-@click.option("--preset", "preset_name", type=click.Choice(["smoke", "laptop", "paper"]),
+@click.option("--preset", "preset_name", type=click.Choice(["smoke", "laptop", "course", "paper"]),
               default=None, help="Trainer preset for --train. 'smoke' alone runs the whole "
                                  "pipeline in minutes (tiny training, 2 episodes per setting).")
 @click.option("--seed", type=int, default=0, show_default=True)

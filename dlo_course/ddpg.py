@@ -65,6 +65,16 @@ class DDPGConfig:
     noise_mu: float = 0.0
     """Ornstein–Uhlenbeck mean."""
 
+    # --- course options, off by default (the paper has neither); see docs/design.md ---
+    normalize_obs: bool = False
+    """Feed the networks ``(obs - offset) / scale`` with a fixed offset and scale from the
+    environment (:meth:`DLOShapeEnv.observation_reference`) instead of the raw observation.
+    The raw rod observation mixes positions of ~1 m with tip speeds up to 20 m/s."""
+    preactivation_l2: float = 0.0
+    """Weight of a penalty ``mean(u**2)`` on the actor's output before the tanh, added to the
+    policy loss. A saturated tanh has no gradient, so an actor pushed to +-1 stays there;
+    the penalty pulls it back where the critic's gradient can reach it."""
+
     def __post_init__(self) -> None:
         self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)  # a list from JSON
         if self.batch_size < 1 or self.buffer_size < 1:
@@ -75,6 +85,8 @@ class DDPGConfig:
             raise ValueError(f"tau must be in (0, 1], got {self.tau}")
         if self.actor_lr <= 0 or self.critic_lr <= 0:
             raise ValueError("learning rates must be positive")
+        if self.preactivation_l2 < 0:
+            raise ValueError(f"preactivation_l2 must be >= 0, got {self.preactivation_l2}")
 
 
 # --- the pieces of one update, as pure functions ---
@@ -127,6 +139,19 @@ def policy_loss(q: torch.Tensor) -> torch.Tensor:
     return -q.mean()
 
 
+def preactivation_penalty(u: torch.Tensor, weight: float) -> torch.Tensor:
+    """``weight * mean(u**2)``: the optional course penalty on the actor's pre-tanh output.
+
+    Args:
+        u: (B, act_dim) the actor's output before the tanh (:meth:`Actor.preactivation`).
+        weight: ``DDPGConfig.preactivation_l2`` (0 in the paper).
+
+    Returns:
+        A scalar tensor.
+    """
+    return weight * (u ** 2).mean()
+
+
 @torch.no_grad()
 def polyak_update(target: nn.Module, source: nn.Module, tau: float) -> None:
     """Soft update, in place: W_T <- tau * W + (1 - tau) * W_T for every parameter.
@@ -157,6 +182,37 @@ def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int, final_init: floa
     return nn.Sequential(*layers)
 
 
+class ObservationScaling(nn.Module):
+    """``(obs - offset) / scale``, with a fixed offset and scale stored as buffers (saved with
+    the network, never trained). Identity when both are ``None``.
+
+    Args:
+        obs_dim: observation length.
+        offset, scale: (obs_dim,) arrays, or ``None`` for no scaling.
+    """
+
+    def __init__(self, obs_dim: int, offset: Any = None, scale: Any = None) -> None:
+        super().__init__()
+        offset = np.zeros(obs_dim) if offset is None else np.asarray(offset)
+        scale = np.ones(obs_dim) if scale is None else np.asarray(scale)
+        if offset.shape != (obs_dim,) or scale.shape != (obs_dim,):
+            raise ValueError(f"observation offset and scale must have shape ({obs_dim},), "
+                             f"got {offset.shape} and {scale.shape}")
+        if not (np.all(np.isfinite(offset)) and np.all(np.isfinite(scale)) and np.all(scale > 0)):
+            raise ValueError("observation offset must be finite and scale finite and positive")
+        self.register_buffer("offset", torch.as_tensor(offset, dtype=torch.float32))
+        self.register_buffer("scale", torch.as_tensor(scale, dtype=torch.float32))
+
+    def forward(self, obs: torch.Tensor) -> torch.Tensor:
+        return (obs - self.offset) / self.scale
+
+
+def _scaling_kwargs(offset: Any, scale: Any) -> dict[str, Any]:
+    # Lists, so that save_network's kwargs load with torch.load(weights_only=True).
+    as_list = lambda a: None if a is None else np.asarray(a, dtype=np.float64).tolist()  # noqa: E731
+    return {"obs_offset": as_list(offset), "obs_scale": as_list(scale)}
+
+
 class Actor(nn.Module):
     """The policy mu(s): observation -> action inside the action bounds.
 
@@ -170,11 +226,14 @@ class Actor(nn.Module):
         action_low, action_high: (act_dim,) bounds of the action space (or scalars).
         hidden_sizes: widths of the hidden layers.
         final_init: half-width of the uniform initialisation of the output layer.
+        obs_offset, obs_scale: (obs_dim,) optional fixed input scaling
+            (:class:`ObservationScaling`); ``None``: raw observations, as in the paper.
     """
 
     def __init__(self, obs_dim: int, act_dim: int, action_low: Any = -1.0,
                  action_high: Any = 1.0, hidden_sizes: Sequence[int] = (256, 256, 256),
-                 final_init: float = 3e-3) -> None:
+                 final_init: float = 3e-3, obs_offset: Any = None, obs_scale: Any = None
+                 ) -> None:
         super().__init__()
         low = np.broadcast_to(np.asarray(action_low, dtype=np.float32), (act_dim,))
         high = np.broadcast_to(np.asarray(action_high, dtype=np.float32), (act_dim,))
@@ -182,15 +241,25 @@ class Actor(nn.Module):
             raise ValueError(f"action bounds must be finite with high > low, got {low}, {high}")
         self.init_kwargs = dict(obs_dim=int(obs_dim), act_dim=int(act_dim),
                                 action_low=low.tolist(), action_high=high.tolist(),
-                                hidden_sizes=list(hidden_sizes), final_init=float(final_init))
+                                hidden_sizes=list(hidden_sizes), final_init=float(final_init),
+                                **_scaling_kwargs(obs_offset, obs_scale))
+        self.scaling = ObservationScaling(obs_dim, obs_offset, obs_scale)
         self.net = mlp(obs_dim, hidden_sizes, act_dim, final_init)
         # Buffers, not parameters: saved with the network but never trained.
         self.register_buffer("action_scale", torch.as_tensor((high - low) / 2))
         self.register_buffer("action_bias", torch.as_tensor((high + low) / 2))
 
+    def preactivation(self, obs: torch.Tensor) -> torch.Tensor:
+        """obs: (B, obs_dim) -> (B, act_dim) the output before the tanh."""
+        return self.net(self.scaling(obs))
+
     def forward(self, obs: torch.Tensor) -> torch.Tensor:
         """obs: (B, obs_dim) -> actions (B, act_dim) in [low, high]."""
-        return self.action_bias + self.action_scale * torch.tanh(self.net(obs))
+        return self.squash(self.preactivation(obs))
+
+    def squash(self, u: torch.Tensor) -> torch.Tensor:
+        """(B, act_dim) pre-tanh outputs -> actions in [low, high]."""
+        return self.action_bias + self.action_scale * torch.tanh(u)
 
 
 class Critic(nn.Module):
@@ -203,18 +272,22 @@ class Critic(nn.Module):
         act_dim: action length.
         hidden_sizes: widths of the hidden layers.
         final_init: half-width of the uniform initialisation of the output layer.
+        obs_offset, obs_scale: (obs_dim,) optional fixed input scaling, as for the actor.
     """
 
     def __init__(self, obs_dim: int, act_dim: int, hidden_sizes: Sequence[int] = (256, 256, 256),
-                 final_init: float = 3e-3) -> None:
+                 final_init: float = 3e-3, obs_offset: Any = None, obs_scale: Any = None
+                 ) -> None:
         super().__init__()
         self.init_kwargs = dict(obs_dim=int(obs_dim), act_dim=int(act_dim),
-                                hidden_sizes=list(hidden_sizes), final_init=float(final_init))
+                                hidden_sizes=list(hidden_sizes), final_init=float(final_init),
+                                **_scaling_kwargs(obs_offset, obs_scale))
+        self.scaling = ObservationScaling(obs_dim, obs_offset, obs_scale)
         self.net = mlp(obs_dim + act_dim, hidden_sizes, 1, final_init)
 
     def forward(self, obs: torch.Tensor, act: torch.Tensor) -> torch.Tensor:
         """obs: (B, obs_dim), act: (B, act_dim) -> Q-values (B, 1)."""
-        return self.net(torch.cat([obs, act], dim=-1))
+        return self.net(torch.cat([self.scaling(obs), act], dim=-1))
 
 
 def save_network(net: Actor | Critic, path: str | Path) -> None:
@@ -246,14 +319,23 @@ class DDPG:
         act_dim: action length.
         action_low, action_high: bounds of the action space (arrays of act_dim, or scalars).
         config: hyperparameters; the paper's by default.
+        obs_offset, obs_scale: (obs_dim,) fixed input scaling of both networks, used only
+            when ``config.normalize_obs`` is set (e.g. from
+            :meth:`DLOShapeEnv.observation_reference`).
     """
 
     def __init__(self, obs_dim: int, act_dim: int, action_low: Any = -1.0,
-                 action_high: Any = 1.0, config: DDPGConfig | None = None) -> None:
+                 action_high: Any = 1.0, config: DDPGConfig | None = None,
+                 obs_offset: Any = None, obs_scale: Any = None) -> None:
         self.config = cfg = config or DDPGConfig()
+        if cfg.normalize_obs and (obs_offset is None or obs_scale is None):
+            raise ValueError("normalize_obs needs obs_offset and obs_scale")
+        if not cfg.normalize_obs:
+            obs_offset = obs_scale = None
         self.actor = Actor(obs_dim, act_dim, action_low, action_high, cfg.hidden_sizes,
-                           cfg.final_init)
-        self.critic = Critic(obs_dim, act_dim, cfg.hidden_sizes, cfg.final_init)
+                           cfg.final_init, obs_offset, obs_scale)
+        self.critic = Critic(obs_dim, act_dim, cfg.hidden_sizes, cfg.final_init,
+                             obs_offset, obs_scale)
         # Targets start as exact copies and are only ever changed by polyak_update.
         self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
@@ -329,7 +411,10 @@ class DDPG:
         # 3. Actor: follow the (just updated) critic uphill. The critic is frozen meanwhile:
         # the policy loss must move the actor only, and this skips its useless gradients.
         self.critic.requires_grad_(False)
-        loss_pi = policy_loss(self.critic(obs, self.actor(obs)))
+        u = self.actor.preactivation(obs)
+        loss_pi = policy_loss(self.critic(obs, self.actor.squash(u)))
+        if cfg.preactivation_l2 > 0:  # course option, not in the paper
+            loss_pi = loss_pi + preactivation_penalty(u, cfg.preactivation_l2)
         self.actor_optimizer.zero_grad()
         loss_pi.backward()
         if grad_reducer is not None:

@@ -174,6 +174,27 @@ class DLOShapeEnv(gym.Env):
     def close(self) -> None:
         self.scene.close()
 
+    def observation_reference(self) -> tuple[np.ndarray, np.ndarray]:
+        """A fixed (offset, scale) per observation component, both (6 + 6m,) float32, such
+        that ``(obs - offset) / scale`` is of order one. Used by DDPG's optional input
+        normalisation (``DDPGConfig.normalize_obs``, not in the paper); see docs/design.md.
+
+        * tip position: centre and half-widths of the tip workspace box;
+        * tip velocity: 0 and the largest commanded tip speed, v_max * action_duration /
+          physics time per action (1 m/s in "paper" time, 20 m/s in "code" time, where an
+          action moves the tip up to 6 cm in 3 ms of physics);
+        * P_c and P_d (the same for both, so that their difference keeps its meaning): the
+          mean and standard deviation of the goal set, per node and axis (at least 1 cm).
+        """
+        low, high = self.scene.workspace
+        prm = self.params
+        speed = prm.v_max * prm.action_duration / prm.physics_time_per_action
+        nodes_offset = self.goal_set.mean(axis=0).ravel()
+        nodes_scale = np.maximum(self.goal_set.std(axis=0).ravel(), 0.01)
+        offset = np.concatenate([(low + high) / 2, np.zeros(3), nodes_offset, nodes_offset])
+        scale = np.concatenate([(high - low) / 2, np.full(3, speed), nodes_scale, nodes_scale])
+        return offset.astype(np.float32), scale.astype(np.float32)
+
     # -------------------------------------------------------------- helpers
     def _observe(self, nodes: np.ndarray) -> tuple[np.ndarray, float]:
         t = time.perf_counter()

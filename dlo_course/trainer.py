@@ -80,6 +80,9 @@ class TrainConfig:
     (``None``: one batch, as in the paper and the authors' code)."""
     expected_agents: int | None = None
     """Number of MPI ranks the preset is meant for; a different number only gives a warning."""
+    updates_per_step: int = 1
+    """DDPG updates per environment step (the paper and the authors' code: 1). More reuse
+    each costly simulator transition; an update costs a few ms, a rod step ~110 ms."""
     torch_threads: int = 1
     """PyTorch threads per process. One: the ranks already fill the cores, and more threads
     per rank would fight over them."""
@@ -98,6 +101,8 @@ class TrainConfig:
             raise ValueError(f"checkpoint_every must be at least 1, got {self.checkpoint_every}")
         if self.reduce not in ("sum", "mean"):
             raise ValueError(f"reduce must be 'sum' or 'mean', got {self.reduce!r}")
+        if self.updates_per_step < 1:
+            raise ValueError(f"updates_per_step must be at least 1, got {self.updates_per_step}")
         if self.warmup is not None and self.warmup < 1:
             raise ValueError(f"warmup must be at least 1, got {self.warmup}")
         if "max_episode_steps" in self.env_kwargs:
@@ -122,6 +127,14 @@ PRESETS: dict[str, TrainConfig] = {
     # The paper: 32 agents x 63 episodes x 300 steps, gradients summed.
     "paper": TrainConfig(episodes=63, steps_per_episode=300, checkpoint_every=7,
                          out_dir="runs/paper", expected_agents=32, reduce="sum"),
+    # What 2 cores can train in about an hour (~16 rod transitions/s): the paper's DDPG with
+    # four course options that make a small budget go further (docs/design.md, "Training on
+    # two cores"): fixed input scaling, a penalty on the saturated actor, shorter episodes
+    # (more goals per transition; test episodes are 30 steps) and 2 updates per step.
+    "course": TrainConfig(episodes=240, steps_per_episode=60, checkpoint_every=10,
+                          out_dir="runs/course", expected_agents=2, updates_per_step=2,
+                          ddpg=DDPGConfig(normalize_obs=True, preactivation_l2=0.01,
+                                          noise_sigma=0.15)),
 }
 
 
@@ -191,7 +204,8 @@ def run_episode(env: gymnasium.Env, agent: DDPG, buffer: ReplayBuffer, noise: OU
             running = not (terminated or truncated)
         # Learn once every agent holds a batch; decided together because updates are collective.
         if mpi.allreduce_scalars(len(buffer), "min")[0] >= warmup:
-            stats.append(agent.update(buffer.sample(config.ddpg.batch_size), grad_reducer))
+            for _ in range(config.updates_per_step):
+                stats.append(agent.update(buffer.sample(config.ddpg.batch_size), grad_reducer))
         if mpi.allreduce_scalars(float(running), "max")[0] == 0.0:
             break  # every agent's episode is over
 
@@ -347,6 +361,19 @@ def make_env(config: TrainConfig) -> gymnasium.Env:
     return env
 
 
+def observation_reference(env: gymnasium.Env) -> tuple[np.ndarray, np.ndarray]:
+    """(offset, scale) for ``DDPGConfig.normalize_obs``: the environment's own
+    ``observation_reference()`` if it has one (the rod), else the centre and half-width of a
+    bounded observation space."""
+    if hasattr(env.unwrapped, "observation_reference"):
+        return env.unwrapped.observation_reference()
+    low, high = env.observation_space.low, env.observation_space.high
+    if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
+        raise ValueError("normalize_obs needs an environment with observation_reference() "
+                         "or a bounded observation space")
+    return (low + high) / 2, np.maximum((high - low) / 2, 1e-6)
+
+
 def train(config: TrainConfig, resume: bool = False, progress: bool = True,
           overwrite: bool = False) -> Path:
     """Train DDPG agents as configured; every MPI rank runs this function as one agent.
@@ -377,7 +404,10 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
     torch.manual_seed(agent_seed)  # network initialisation (rank 0's wins, see below)
     env = make_env(config)
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
-    agent = DDPG(obs_dim, act_dim, env.action_space.low, env.action_space.high, config.ddpg)
+    obs_offset, obs_scale = (observation_reference(env) if config.ddpg.normalize_obs
+                             else (None, None))
+    agent = DDPG(obs_dim, act_dim, env.action_space.low, env.action_space.high, config.ddpg,
+                 obs_offset, obs_scale)
     # default_rng hashes its seed, so the neighbouring seeds give unrelated streams.
     buffer = ReplayBuffer(obs_dim, act_dim, config.ddpg.buffer_size, seed=agent_seed)
     noise = OUNoise(act_dim, config.ddpg.noise_theta, config.ddpg.noise_sigma,
