@@ -19,8 +19,10 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -149,19 +151,30 @@ def write_table(rows: list[dict], paper: dict, out: Path) -> tuple[Path, Path]:
 
 
 def training_record(checkpoints: Path, n_nodes: int) -> dict:
-    """What an agent's training cost: ranks, episodes, transitions, wall time, seed, commit."""
-    from dlo_course.learning_curves import read_progress
-
+    """What an agent's training cost: ranks, episodes, transitions, wall time, seed, commit,
+    and the settings that differ between presets. Read from ``record.json`` if present."""
     folder = checkpoint_dir(checkpoints, n_nodes)
     record_file = folder / "record.json"
     if record_file.is_file():
         return json.loads(record_file.read_text())
-    record = {}
+    return _run_record(folder)
+
+
+def _run_record(folder: Path) -> dict:
+    from dlo_course.learning_curves import read_progress
+
+    record: dict[str, Any] = {}
     config_file = folder / "config.json"
     if config_file.is_file():
         config = json.loads(config_file.read_text())
-        record.update(ranks=config.get("n_agents"), seed=config["config"].get("seed"),
-                      reduce=config["config"].get("reduce"))
+        cfg, ddpg = config["config"], config["config"].get("ddpg", {})
+        record.update(ranks=config.get("n_agents"), seed=cfg.get("seed"),
+                      reduce=cfg.get("reduce"), commit=config.get("commit"),
+                      steps_per_episode=cfg.get("steps_per_episode"),
+                      updates_per_step=cfg.get("updates_per_step", 1),
+                      normalize_obs=ddpg.get("normalize_obs", False),
+                      preactivation_l2=ddpg.get("preactivation_l2", 0.0),
+                      noise_sigma=ddpg.get("noise_sigma"))
     try:
         progress = read_progress(folder)
     except (FileNotFoundError, ValueError):  # no run yet, or not one episode
@@ -170,6 +183,27 @@ def training_record(checkpoints: Path, n_nodes: int) -> dict:
                   transitions=int(progress["transitions"][-1]),
                   wall_time_h=float(progress["wall_time"][-1]) / 3600)
     return record
+
+
+SHIPPED_FILES = ("actor.pt", "critic.pt", "config.json", "progress.csv")
+
+
+def ship_run(run_dir: Path, dest: Path, **extra: Any) -> Path:
+    """Copy a finished run's networks, configuration and learning curve into ``dest`` (e.g.
+    ``data/checkpoints/nodes4``) without its bulky resume checkpoints (replay buffers), and
+    write ``record.json``: what the training cost (:func:`training_record`) plus ``extra``
+    (e.g. ``commit=...`` for runs started before the trainer recorded it)."""
+    run_dir, dest = Path(run_dir), Path(dest)
+    missing = [f for f in SHIPPED_FILES if not (run_dir / f).is_file()]
+    if missing:
+        raise FileNotFoundError(f"{run_dir} is not a finished run: missing {missing}")
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in SHIPPED_FILES:
+        shutil.copy2(run_dir / name, dest / name)
+    (dest / "record.json").unlink(missing_ok=True)
+    record = {**_run_record(dest), **{k: v for k, v in extra.items() if v is not None}}
+    (dest / "record.json").write_text(json.dumps(record, indent=2) + "\n")
+    return dest
 
 
 def plot_deformation(checkpoints: Path, out: Path, n_nodes: int = 4, seed: int = 0,
@@ -226,6 +260,20 @@ def plot_deformation(checkpoints: Path, out: Path, n_nodes: int = 4, seed: int =
     return path
 
 
+def course_options(record: dict) -> str:
+    """The course options a training used, in words ("none" for the paper's DDPG)."""
+    parts = []
+    if record.get("normalize_obs"):
+        parts.append("input scaling")
+    if record.get("preactivation_l2"):
+        parts.append(f"pre-tanh penalty {record['preactivation_l2']:g}")
+    if record.get("updates_per_step", 1) != 1:
+        parts.append(f"{record['updates_per_step']} updates/step")
+    if record.get("noise_sigma") not in (None, 0.3):
+        parts.append(f"OU sigma {record['noise_sigma']:g}")
+    return ", ".join(parts) or "none"
+
+
 def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 20,
               max_steps: int = 30, seed: int = 0, train_preset: str | None = None,
               time_mode: str = "code") -> Path | None:
@@ -267,17 +315,19 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 20,
         "## Training budgets (the paper: 32 agents x 63 episodes x 300 steps = 604 800 "
         "transitions, gradients summed, under 3.5 h on 32 cores)",
         "",
-        "| nodes | ranks | episodes per agent | transitions | wall time (h) | gradient "
-        "reduction | seed | commit |",
-        "|---|---|---|---|---|---|---|---|",
+        "| nodes | ranks | episodes per agent x steps | transitions | wall time (h) | "
+        "gradient reduction | course options | seed | commit |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]
     for n, rec in records.items():
         wall = rec.get("wall_time_h")
-        lines.append(f"| {n} | {rec.get('ranks', '?')} | {rec.get('episodes_per_agent', '?')} | "
-                     f"{rec.get('transitions', '?')} | "
+        lines.append(f"| {n} | {rec.get('ranks', '?')} | {rec.get('episodes_per_agent', '?')} x "
+                     f"{rec.get('steps_per_episode', '?')} | {rec.get('transitions', '?')} | "
                      f"{'?' if wall is None else f'{wall:.2f}'} | "
-                     f"{rec.get('reduce', '?')} | {rec.get('seed', '?')} | "
-                     f"{rec.get('commit', '?')} |")
+                     f"{rec.get('reduce', '?')} | {course_options(rec)} | "
+                     f"{rec.get('seed', '?')} | {rec.get('commit', '?')} |")
+    lines += ["", "Course options (not in the paper, docs/design.md): input scaling, pre-tanh "
+              "penalty, updates per environment step, OU sigma when it differs from 0.3."]
     lines += ["", "## Table I: ours beside the paper's", "", md_path.read_text(),
               f"Files: `{csv_path.name}`, `{md_path.name}`, `fig4_learning_curves.png`, "
               f"`{fig5.name}`."]

@@ -361,6 +361,18 @@ def make_env(config: TrainConfig) -> gymnasium.Env:
     return env
 
 
+def _git_commit() -> str | None:
+    """The commit of the library's source, if it runs from a git checkout (for the record)."""
+    import subprocess
+
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                             text=True, timeout=10, cwd=Path(__file__).parent)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
 def observation_reference(env: gymnasium.Env) -> tuple[np.ndarray, np.ndarray]:
     """(offset, scale) for ``DDPGConfig.normalize_obs``: the environment's own
     ``observation_reference()`` if it has one (the rod), else the centre and half-width of a
@@ -430,7 +442,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
     progress_file = None
     if root:
         out.mkdir(parents=True, exist_ok=True)
-        _write_json({"config": config.to_dict(), "n_agents": n_agents,
+        _write_json({"config": config.to_dict(), "n_agents": n_agents, "commit": _git_commit(),
                      "versions": {"python": platform.python_version(), "torch": torch.__version__,
                                   "gymnasium": gymnasium.__version__, "numpy": np.__version__}},
                     out / "config.json")

@@ -137,3 +137,61 @@ def test_bad_config():
         DDPGConfig(tau=0.0)
     with pytest.raises(ValueError, match="bounds"):
         Actor(3, 1, action_low=-np.inf, action_high=np.inf)
+
+
+# --- course options (off by default: the paper has neither) ---
+
+def test_course_options_are_off_by_default():
+    c = DDPGConfig()
+    assert not c.normalize_obs and c.preactivation_l2 == 0.0
+    agent = DDPG(5, 2, config=SMALL)
+    obs = torch.randn(4, 5)
+    torch.testing.assert_close(agent.actor.scaling(obs), obs)  # identity scaling
+
+
+def test_observation_scaling_is_applied_and_saved(tmp_path):
+    offset, scale = np.arange(5.0), np.array([1.0, 2.0, 4.0, 0.5, 10.0])
+    cfg = DDPGConfig(hidden_sizes=(16, 16), batch_size=8, normalize_obs=True)
+    agent = DDPG(5, 2, config=cfg, obs_offset=offset, obs_scale=scale)
+    obs = torch.randn(3, 5, dtype=torch.float32)
+    expected_input = (obs - torch.tensor(offset, dtype=torch.float32)) / torch.tensor(
+        scale, dtype=torch.float32)
+    torch.testing.assert_close(agent.actor.preactivation(obs), agent.actor.net(expected_input))
+    act = torch.rand(3, 2)
+    torch.testing.assert_close(agent.critic(obs, act),
+                               agent.critic.net(torch.cat([expected_input, act], dim=-1)))
+    # The scaling travels with the saved network, so evaluation needs no extra file.
+    save_network(agent.actor, tmp_path / "actor.pt")
+    loaded = load_network(tmp_path / "actor.pt")
+    torch.testing.assert_close(loaded(obs), agent.actor(obs))
+    # The scaling is never trained.
+    assert all(p.shape != (5,) for p in agent.actor.parameters())
+    with pytest.raises(ValueError, match="normalize_obs needs"):
+        DDPG(5, 2, config=cfg)
+    with pytest.raises(ValueError, match="positive"):
+        DDPG(5, 2, config=cfg, obs_offset=offset, obs_scale=np.zeros(5))
+    with pytest.raises(ValueError, match="shape"):
+        DDPG(5, 2, config=cfg, obs_offset=offset[:3], obs_scale=scale[:3])
+
+
+def test_preactivation_penalty_by_hand_and_in_the_update():
+    from dlo_course.ddpg import preactivation_penalty
+    u = torch.tensor([[1.0, -3.0], [0.0, 2.0]])
+    assert preactivation_penalty(u, 0.5).item() == pytest.approx(0.5 * (1 + 9 + 0 + 4) / 4)
+    # A saturated actor: the tanh has no gradient left, only the penalty pulls it back.
+    batch = random_batch(np.random.default_rng(0))
+    for weight, expect_shrink in ((0.0, False), (1.0, True)):
+        torch.manual_seed(0)
+        cfg = DDPGConfig(hidden_sizes=(16, 16), batch_size=8, actor_lr=1e-2,
+                         preactivation_l2=weight)
+        agent = DDPG(5, 2, config=cfg)
+        with torch.no_grad():
+            agent.actor.net[-1].bias.fill_(8.0)  # tanh(8) = 0.9999998
+        obs = torch.as_tensor(batch["obs"], dtype=torch.float32)
+        before = agent.actor.preactivation(obs).abs().mean().item()
+        for _ in range(20):
+            agent.update(batch)
+        after = agent.actor.preactivation(obs).abs().mean().item()
+        assert (after < before - 0.1) == expect_shrink, (weight, before, after)
+    with pytest.raises(ValueError):
+        DDPGConfig(preactivation_l2=-1.0)

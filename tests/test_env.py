@@ -264,3 +264,19 @@ def test_paper_time_is_twenty_code_steps_per_action():
     finally:
         code.close()
         paper.close()
+
+
+def test_observation_reference_makes_observations_of_order_one(make_env, far_goals):
+    env = make_env(n_nodes=4, goals=far_goals)
+    offset, scale = env.observation_reference()
+    assert offset.shape == scale.shape == (30,) and np.all(scale > 0)
+    low, high = env.scene.workspace
+    np.testing.assert_allclose(offset[:3], (low + high) / 2, atol=1e-6)
+    # Code time: an action moves the tip up to 6 cm in 3 ms of physics, i.e. 20 m/s.
+    np.testing.assert_allclose(scale[3:6], 20.0)
+    np.testing.assert_allclose(offset[6:18], offset[18:])  # P_c and P_d scaled alike
+    np.testing.assert_allclose(offset[18:], far_goals.mean(axis=0).ravel(), atol=1e-6)
+    obs, _ = env.reset(seed=0)
+    for _ in range(3):
+        obs, *_ = env.step([1.0, -1.0, -1.0])
+        assert np.all(np.abs((obs - offset) / scale)[:6] < 3.0)

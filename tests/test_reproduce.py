@@ -71,3 +71,26 @@ def test_cluster_script_runs_the_whole_pipeline_with_the_smoke_preset(tmp_path):
     for n in (2, 4, 6):
         assert (out / f"nodes{n}" / "actor.pt").is_file()
     assert "| 2 | 2 | 2 |" in (report / "report.md").read_text()  # ranks and episodes per agent
+
+
+def test_ship_run_copies_the_networks_and_writes_the_training_record(tmp_path):
+    from dlo_course.ddpg import DDPGConfig
+    from dlo_course.reproduce import course_options, ship_run, training_record
+    from dlo_course.trainer import TrainConfig, train
+
+    run = train(TrainConfig(env_id="Pendulum-v1", env_kwargs={}, episodes=2,
+                            steps_per_episode=20, out_dir=str(tmp_path / "run"), seed=4,
+                            updates_per_step=2,
+                            ddpg=DDPGConfig(hidden_sizes=(8,), batch_size=8,
+                                            normalize_obs=True)), progress=False)
+    dest = ship_run(run, tmp_path / "checkpoints" / "nodes2", note="test")
+    assert sorted(p.name for p in dest.iterdir()) == sorted(
+        ["actor.pt", "critic.pt", "config.json", "progress.csv", "record.json"])
+    record = training_record(tmp_path / "checkpoints", 2)
+    assert record["ranks"] == 1 and record["seed"] == 4 and record["note"] == "test"
+    assert record["episodes_per_agent"] == 2 and record["transitions"] == 40
+    assert record["commit"]  # this test runs from a git checkout
+    assert course_options(record) == "input scaling, 2 updates/step"
+    assert course_options({}) == "none"
+    with pytest.raises(FileNotFoundError, match="not a finished run"):
+        ship_run(tmp_path / "nowhere", tmp_path / "x")

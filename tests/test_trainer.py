@@ -180,3 +180,24 @@ def test_presets():
     smoke = preset("smoke", seed=5)
     assert smoke.seed == 5 and smoke.episodes * smoke.steps_per_episode <= 40
     assert PRESETS["smoke"].seed == 0  # presets are copied, not modified
+    # The course preset changes only the documented course options and the budget.
+    import dataclasses
+    course = preset("course")
+    assert dataclasses.replace(course.ddpg, normalize_obs=False, preactivation_l2=0.0,
+                               noise_sigma=0.3) == DDPGConfig()
+    assert course.updates_per_step == 2 and course.reduce == "sum"
+
+
+def test_updates_per_step_and_observation_scaling_from_a_bounded_space(tmp_path):
+    one = train(tiny(tmp_path, "one", episodes=1), progress=False)
+    two = train(tiny(tmp_path, "two", episodes=1, updates_per_step=2,
+                     ddpg=DDPGConfig(hidden_sizes=(32, 32), batch_size=16, buffer_size=500,
+                                     normalize_obs=True)), progress=False)
+    updates = [int(read_rows(run)[-1]["updates"]) for run in (one, two)]
+    assert updates[1] == 2 * updates[0] > 0
+    # Pendulum's observation box is [-1, 1] x [-1, 1] x [-8, 8]: centre 0, half-widths.
+    actor = load_network(two / "actor.pt")
+    torch.testing.assert_close(actor.scaling.scale, torch.tensor([1.0, 1.0, 8.0]))
+    torch.testing.assert_close(actor.scaling.offset, torch.zeros(3))
+    with pytest.raises(ValueError, match="updates_per_step"):
+        tiny(tmp_path, updates_per_step=0)
