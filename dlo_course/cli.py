@@ -107,7 +107,9 @@ def bench_env(steps: int, paper_steps: int, seed: int) -> None:
 @click.option("--preset", "preset_name", type=click.Choice(["smoke", "laptop", "course", "paper"]),
               default="smoke", show_default=True,
               help="Starting configuration: smoke (seconds, CI), laptop (~1 h on 4 cores), "
-                   "paper (32 agents x 63 episodes x 300 steps). The flags below override it.")
+                   "course (~40 min on 2 cores, with the course options that trained the "
+                   "shipped agents), paper (32 agents x 63 episodes x 300 steps). The flags "
+                   "below override it.")
 @click.option("--env", "env_id", default=None,
               help="Gymnasium id of any continuous-control environment [preset: DLOShape-v0]. "
                    "Changing it drops the preset's environment arguments.")
@@ -317,7 +319,7 @@ def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_ste
         raise click.UsageError("--preset chooses how to retrain: add --train "
                                "(only 'smoke' implies it)")
     if retrain and preset_name is None:
-        raise click.UsageError("--train needs --preset smoke|laptop|paper")
+        raise click.UsageError("--train needs --preset smoke|laptop|course|paper")
     if retrain and checkpoints is not None:
         raise click.UsageError("--train writes new checkpoints; drop --checkpoints")
     episodes = episodes or (2 if smoke else 20)
