@@ -70,7 +70,7 @@ def test_cluster_script_runs_the_whole_pipeline_with_the_smoke_preset(tmp_path):
         assert (report / name).stat().st_size > 0
     for n in (2, 4, 6):
         assert (out / f"nodes{n}" / "actor.pt").is_file()
-    assert "| 2 | 2 | 2 |" in (report / "report.md").read_text()  # ranks and episodes per agent
+    assert "| 2 | 2 | 2 x 20 |" in (report / "report.md").read_text()  # ranks, episodes x steps
 
 
 def test_ship_run_copies_the_networks_and_writes_the_training_record(tmp_path):
