@@ -178,6 +178,37 @@ def goal_schedule(n_goals: int, episodes: int, seed: int) -> np.ndarray:
     return np.random.default_rng(seed).integers(n_goals, size=episodes)
 
 
+def recorded_tip_controller(database, n_nodes: int):
+    """A privileged, hand-made baseline policy (not learned): it looks up which database goal
+    the observation asks for and drives the tip at full speed straight to where the tip was
+    when that goal was recorded. It cheats (it knows the database) and it ignores the rod's
+    dynamics; lesson 10 and ``benchmarks/recorded_tip_controller.py`` use it as a yardstick.
+
+    Args:
+        database: a :class:`~dlo_course.database.Database` (its ``goals(n_nodes)`` and ``tip``).
+        n_nodes: selected nodes in the observation.
+
+    Returns:
+        A module mapping (B, 6 + 6 n_nodes) observations to (B, 3) actions in [-1, 1].
+    """
+    import torch
+    from torch import nn
+
+    goals = torch.as_tensor(database.goals(n_nodes).reshape(len(database.tip), -1),
+                            dtype=torch.float32)
+    tips = torch.as_tensor(database.tip, dtype=torch.float32)
+    # The tip moves at most v_max * action_duration = 0.06 m per action.
+    step = 0.06
+
+    class RecordedTipController(nn.Module):
+        def forward(self, obs: torch.Tensor) -> torch.Tensor:
+            desired = obs[:, 6 + 3 * n_nodes:]
+            index = torch.cdist(desired, goals).argmin(dim=1)
+            return torch.clamp((tips[index] - obs[:, :3]) / step, -1.0, 1.0)
+
+    return RecordedTipController()
+
+
 # ------------------------------------------------------------------------------ protocol
 def play_episode(actor, env, obs: np.ndarray, max_steps: int) -> tuple[bool, int, dict]:
     """Run the deterministic policy from the environment's current state, just after a reset.

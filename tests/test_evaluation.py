@@ -150,3 +150,22 @@ def test_cli_reports_a_mismatched_checkpoint_without_a_traceback(checkpoint):
     assert result.returncode != 0
     assert "trained for 2 nodes" in result.stderr
     assert "Traceback" not in result.stderr
+
+
+def test_recorded_tip_controller_heads_for_the_recorded_tip():
+    import torch
+
+    from dlo_course import load_database
+    from dlo_course.evaluation import recorded_tip_controller
+
+    db = load_database("small")
+    controller = recorded_tip_controller(db, 2)
+    i, j = 17, 400
+    obs = np.zeros((2, 18), np.float32)
+    obs[0, :3] = db.tip[i] + [0.03, 0.0, -0.12]  # 3 cm and 12 cm from goal i's recorded tip
+    obs[0, 6 + 6:] = db.goals(2)[i].ravel()
+    obs[1, :3] = db.tip[j]
+    obs[1, 6 + 6:] = db.goals(2)[j].ravel()
+    actions = controller(torch.as_tensor(obs)).numpy()
+    np.testing.assert_allclose(actions[0], [-0.5, 0.0, 1.0], atol=1e-4)  # +z clipped to 1
+    np.testing.assert_allclose(actions[1], 0.0, atol=1e-5)
