@@ -169,3 +169,20 @@ def test_recorded_tip_controller_heads_for_the_recorded_tip():
     actions = controller(torch.as_tensor(obs)).numpy()
     np.testing.assert_allclose(actions[0], [-0.5, 0.0, 1.0], atol=1e-4)  # +z clipped to 1
     np.testing.assert_allclose(actions[1], 0.0, atol=1e-5)
+
+
+@pytest.mark.parametrize("n_nodes", [2, 4, 6])
+def test_shipped_agents_load_with_their_training_record(n_nodes):
+    import json
+
+    from dlo_course.paths import CHECKPOINT_DIR
+
+    folder = CHECKPOINT_DIR / f"nodes{n_nodes}"
+    actor, nodes = load_actor(folder)
+    assert nodes == n_nodes and actor.init_kwargs["obs_dim"] == 6 + 6 * n_nodes
+    record = json.loads((folder / "record.json").read_text())
+    for key in ("ranks", "episodes_per_agent", "transitions", "wall_time_h", "seed", "commit"):
+        assert record[key] is not None, key
+    other = 4 if n_nodes != 4 else 6
+    with pytest.raises(CheckpointError, match=f"trained for {n_nodes} nodes"):
+        load_actor(folder, other)
