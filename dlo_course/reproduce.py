@@ -250,6 +250,10 @@ def plot_deformation(checkpoints: Path, out: Path, n_nodes: int = 4, seed: int =
     plot_rod(ax, start_nodes, color="grey", label="initial shape")
     plot_rod(ax, end_nodes, selected=ids, goal=goals[goal_index],
              label="final shape")
+    # True proportions: a 1.55 m rod bent by tens of centimetres; matplotlib's default cube
+    # stretches the sideways bend until it is unreadable.
+    points = np.concatenate([start_nodes, end_nodes, goals[goal_index]])
+    ax.set_box_aspect(np.maximum(np.ptp(points, axis=0), 0.05))
     ax.set_title(f"{n_nodes} nodes, large-database goal {goal_index}\n"
                  f"(outside the training box)")
     ax.legend(loc="upper left")
