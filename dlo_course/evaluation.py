@@ -194,11 +194,14 @@ def recorded_tip_controller(database, n_nodes: int):
     import torch
     from torch import nn
 
+    from dlo_course.simulation import SimParams
+
     goals = torch.as_tensor(database.goals(n_nodes).reshape(len(database.tip), -1),
                             dtype=torch.float32)
     tips = torch.as_tensor(database.tip, dtype=torch.float32)
-    # The tip moves at most v_max * action_duration = 0.06 m per action.
-    step = 0.06
+    # The largest tip displacement of one action (0.06 m): action +-1 covers it.
+    params = SimParams()
+    step = params.v_max * params.action_duration
 
     class RecordedTipController(nn.Module):
         def forward(self, obs: torch.Tensor) -> torch.Tensor:

@@ -162,19 +162,20 @@ def training_record(checkpoints: Path, n_nodes: int) -> dict:
 
 def _run_record(folder: Path) -> dict:
     from dlo_course.learning_curves import read_progress
+    from dlo_course.trainer import TrainConfig
 
     record: dict[str, Any] = {}
     config_file = folder / "config.json"
     if config_file.is_file():
         config = json.loads(config_file.read_text())
-        cfg, ddpg = config["config"], config["config"].get("ddpg", {})
-        record.update(ranks=config.get("n_agents"), seed=cfg.get("seed"),
-                      reduce=cfg.get("reduce"), commit=config.get("commit"),
-                      steps_per_episode=cfg.get("steps_per_episode"),
-                      updates_per_step=cfg.get("updates_per_step", 1),
-                      normalize_obs=ddpg.get("normalize_obs", False),
-                      preactivation_l2=ddpg.get("preactivation_l2", 0.0),
-                      noise_sigma=ddpg.get("noise_sigma"))
+        # Through the dataclass, so that a run older than an option reads as its default.
+        cfg = TrainConfig.from_dict(config["config"])
+        record.update(ranks=config.get("n_agents"), seed=cfg.seed, reduce=cfg.reduce,
+                      commit=config.get("commit"), steps_per_episode=cfg.steps_per_episode,
+                      updates_per_step=cfg.updates_per_step,
+                      normalize_obs=cfg.ddpg.normalize_obs,
+                      preactivation_l2=cfg.ddpg.preactivation_l2,
+                      noise_sigma=cfg.ddpg.noise_sigma)
     try:
         progress = read_progress(folder)
     except (FileNotFoundError, ValueError):  # no run yet, or not one episode
@@ -200,7 +201,6 @@ def ship_run(run_dir: Path, dest: Path, **extra: Any) -> Path:
     dest.mkdir(parents=True, exist_ok=True)
     for name in SHIPPED_FILES:
         shutil.copy2(run_dir / name, dest / name)
-    (dest / "record.json").unlink(missing_ok=True)
     record = {**_run_record(dest), **{k: v for k, v in extra.items() if v is not None}}
     (dest / "record.json").write_text(json.dumps(record, indent=2) + "\n")
     return dest
@@ -266,14 +266,18 @@ def plot_deformation(checkpoints: Path, out: Path, n_nodes: int = 4, seed: int =
 
 def course_options(record: dict) -> str:
     """The course options a training used, in words ("none" for the paper's DDPG)."""
+    from dlo_course.ddpg import DDPGConfig
+    from dlo_course.trainer import TrainConfig
+
+    paper, paper_updates = DDPGConfig(), TrainConfig().updates_per_step
     parts = []
     if record.get("normalize_obs"):
         parts.append("input scaling")
     if record.get("preactivation_l2"):
         parts.append(f"pre-tanh penalty {record['preactivation_l2']:g}")
-    if record.get("updates_per_step", 1) != 1:
+    if record.get("updates_per_step", paper_updates) != paper_updates:
         parts.append(f"{record['updates_per_step']} updates/step")
-    if record.get("noise_sigma") not in (None, 0.3):
+    if record.get("noise_sigma") not in (None, paper.noise_sigma):
         parts.append(f"OU sigma {record['noise_sigma']:g}")
     return ", ".join(parts) or "none"
 

@@ -370,7 +370,9 @@ def _git_commit() -> str | None:
                              text=True, timeout=10, cwd=Path(__file__).parent)
     except (OSError, subprocess.SubprocessError):
         return None
-    return out.stdout.strip() or None if out.returncode == 0 else None
+    if out.returncode != 0:
+        return None
+    return out.stdout.strip() or None
 
 
 def observation_reference(env: gymnasium.Env) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,15 @@ def as_row_set(rows, width):
     return {tuple(sorted(int(i) for i in row)) for row in rows}
 
 
+def assert_same_rows_on_every_mesh(exercise, reference, width, noun):
+    """exercise(tets) gives the rows of ``reference(mesh)`` (in any order) on every mesh."""
+    for mesh in random_meshes():
+        got = np.asarray(exercise(mesh.tets.copy()))
+        expected = reference(mesh)
+        assert len(got) == len(expected), f"{len(got)} {noun}, expected {len(expected)}"
+        assert as_row_set(got, width) == as_row_set(expected, width)
+
+
 @pytest.mark.exercise("tet_signed_volumes", points=2)
 def test_tet_signed_volumes(exercise):
     for mesh in random_meshes():
@@ -37,21 +46,13 @@ def test_tet_signed_volumes(exercise):
 
 @pytest.mark.exercise("mesh_edges", points=2)
 def test_mesh_edges(exercise):
-    for mesh in random_meshes():
-        got = np.asarray(exercise(mesh.tets.copy()))
-        expected = mesh.edges
-        assert len(got) == len(expected), f"{len(got)} edges, expected {len(expected)}"
-        assert as_row_set(got, 2) == as_row_set(expected, 2)
+    assert_same_rows_on_every_mesh(exercise, lambda mesh: mesh.edges, 2, "edges")
     assert len(exercise(make_rod_mesh().tets)) == 789
 
 
 @pytest.mark.exercise("surface_triangles", points=2)
 def test_surface_triangles(exercise):
-    for mesh in random_meshes():
-        got = np.asarray(exercise(mesh.tets.copy()))
-        expected = mesh.surface_triangles
-        assert len(got) == len(expected), f"{len(got)} faces, expected {len(expected)}"
-        assert as_row_set(got, 3) == as_row_set(expected, 3)
+    assert_same_rows_on_every_mesh(exercise, lambda mesh: mesh.surface_triangles, 3, "faces")
     two = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])  # two tetrahedra sharing the face (1, 2, 3)
     assert as_row_set(exercise(two), 3) == as_row_set(TetMesh(np.zeros((5, 3)), two)
                                                       .surface_triangles, 3)
