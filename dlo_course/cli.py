@@ -14,6 +14,27 @@ import click
 from dlo_course.paths import DATA_DIR
 
 
+class PresetChoice(click.Choice):
+    """``click.Choice`` among the trainer's presets (the keys of ``trainer.PRESETS``).
+
+    The names are read from the trainer when first needed (parsing or help of a command that
+    takes a preset), not when this module is imported: the trainer imports torch, which
+    would slow down every command."""
+
+    def __init__(self) -> None:
+        super().__init__(())
+
+    @property
+    def choices(self) -> tuple[str, ...]:
+        from dlo_course.trainer import PRESETS
+
+        return tuple(PRESETS)
+
+    @choices.setter
+    def choices(self, value: object) -> None:  # click.Choice.__init__ assigns it: ignored
+        pass
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 def main() -> None:
     """dlo-course: deep RL for the shape control of deformable linear objects."""
@@ -37,15 +58,20 @@ def mesh(out: Path) -> None:
               help="Which deformation box of the paper to sweep.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Output .npz (default: data/databases/BOX.npz).")
-@click.option("--settle-steps", type=int, default=None,
-              help="Extra actions after each move, before recording (default: DatabaseSweep's).")
+@click.option("--settle", "settle_steps", type=click.IntRange(min=0), default=None,
+              help="Record with the settled protocol, holding the tip still for this many "
+                   "actions before each record (the first round used 15). Default: the "
+                   "authors' sweep, a snapshot 6 ms after every move.")
 @click.option("--time-mode", type=click.Choice(["code", "paper"]), default="code",
-              show_default=True, help="Time per action (see SimParams.time_mode).")
+              show_default=True, help="Time per action of the settled protocol "
+                                      "(see SimParams.time_mode).")
 @click.option("--limit", type=int, default=None,
               help="Stop after this many deformations (for a quick look; the file is partial).")
 def database(box: str, out: Path | None, settle_steps: int | None, time_mode: str,
              limit: int | None) -> None:
-    """Sweep the tip through a paper box and record every deformation (Fig. 3)."""
+    """Sweep the tip through a paper box and record every deformation (Fig. 3).
+
+    The small box takes about 6 minutes on one core, the large one about 17."""
     from dlo_course.database import generate_database
 
     path = generate_database(box, out=out, settle_steps=settle_steps, time_mode=time_mode,
@@ -67,8 +93,9 @@ def plot_boxes(out: Path) -> None:
 @main.command()
 @click.option("--nodes", "n_nodes", type=click.Choice(["2", "4", "6"]), default="4",
               show_default=True, help="Number of selected mesh nodes.")
-@click.option("--goals", type=click.Choice(["small", "large"]), default="small",
-              show_default=True, help="Deformation database the goal is drawn from.")
+@click.option("--goals", type=click.Choice(["small", "large", "small-test", "large-test"]),
+              default="small", show_default=True,
+              help="Goal set: a whole database, or the paper's test goals drawn from it.")
 @click.option("--steps", type=click.IntRange(1, 10_000), default=30, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
@@ -100,21 +127,43 @@ def bench_env(steps: int, paper_steps: int, seed: int) -> None:
     run(steps=steps, paper_steps=paper_steps, seed=seed)
 
 
+@bench.command("scene")
+@click.option("--actions", type=click.IntRange(1), default=60, show_default=True,
+              help="Random tip moves every scene makes.")
+@click.option("--block", type=click.IntRange(1), default=10, show_default=True,
+              help="Moves per scene before the next scene's turn.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--switches", is_flag=True,
+              help="Add rows that switch off the course's differences one at a time.")
+@click.option("--knobs", is_flag=True,
+              help="Add rows that try PyBullet settings on the course's scene.")
+@click.option("--plane-contact", is_flag=True,
+              help="Leave the rod-plane contact on in the authors' scene (it explodes).")
+def bench_scene(actions: int, block: int, seed: int, switches: bool, knobs: bool,
+                plane_contact: bool) -> None:
+    """The course's scene against a minimal scene with the authors' settings, interleaved."""
+    from dlo_course.scene_bench import bench_scene as run
+
+    run(actions=actions, block=block, seed=seed, switch_table=switches, knob_table=knobs,
+        plane_contact=plane_contact)
+
+
 # --- learning: train / plot (DDPG + MPI trainer) ---
 
 
 @main.command()
-@click.option("--preset", "preset_name", type=click.Choice(["smoke", "laptop", "course", "paper"]),
+@click.option("--preset", "preset_name", type=PresetChoice(),
               default="smoke", show_default=True,
               help="Starting configuration: smoke (seconds, CI), laptop (~1 h on 4 cores), "
                    "course (~40 min on 2 cores, with the course options that trained the "
-                   "shipped agents), paper (32 agents x 63 episodes x 300 steps). The flags "
+                   "shipped agents), paper (32 agents x 63 episodes x 300 steps), recipe "
+                   "(provisional: 4 nodes, 2 cores, every training lever below on). The flags "
                    "below override it.")
 @click.option("--env", "env_id", default=None,
               help="Gymnasium id of any continuous-control environment [preset: DLOShape-v0]. "
                    "Changing it drops the preset's environment arguments.")
 @click.option("--nodes", type=click.IntRange(min=1), default=None,
-              help="Rod nodes to control (2, 4 or 6) [preset: 2].")
+              help="Rod nodes to control (2, 4 or 6) [preset; the paper: 2].")
 @click.option("--episodes", type=click.IntRange(min=1), default=None,
               help="Episodes per agent [preset].")
 @click.option("--steps-per-episode", type=click.IntRange(min=1), default=None,
@@ -128,13 +177,40 @@ def bench_env(steps: int, paper_steps: int, seed: int) -> None:
               help="Combine the agents' gradients by sum (the paper) or mean [preset: sum].")
 @click.option("--checkpoint-every", type=click.IntRange(min=1), default=None,
               help="Episodes between checkpoints [preset].")
+@click.option("--batch-size", type=click.IntRange(min=1), default=None,
+              help="Transitions per DDPG update [preset; the paper: 128].")
+@click.option("--updates-per-step", type=click.IntRange(min=1), default=None,
+              help="DDPG updates per environment step [preset; the paper: 1].")
+@click.option("--her-k", type=click.IntRange(min=0), default=None,
+              help="Hindsight relabelling: copies of each transition with goals reached later "
+                   "in its episode (0: off) [preset; the paper: 0].")
+@click.option("--twin-critics/--no-twin-critics", default=None,
+              help="TD3's clipped double Q: two critics, the target from the smaller "
+                   "[preset; the paper: off].")
+@click.option("--policy-delay", type=click.IntRange(min=1), default=None,
+              help="TD3: update the actor and the targets every this many critic updates "
+                   "[preset; the paper: 1].")
+@click.option("--target-noise", type=click.FloatRange(min=0), default=None,
+              help="TD3's target policy smoothing: noise std in normalised action units "
+                   "(0: off) [preset; the paper: 0].")
+@click.option("--target-noise-clip", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Clip of that noise [preset; default 0.5].")
+@click.option("--reset-between-episodes/--keep-shape", default=None,
+              help="Rebuild the world before every training episode (the paper's text), or "
+                   "start each from the shape the last one ended in (the authors' code) "
+                   "[preset; the paper: rebuild].")
 @click.option("--progress/--no-progress", default=True, show_default=True,
               help="Progress bar (rank 0).")
 def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int | None,
           steps_per_episode: int | None, seed: int, out: Path | None, resume: bool,
           overwrite: bool, reduce: str | None, checkpoint_every: int | None,
+          batch_size: int | None, updates_per_step: int | None, her_k: int | None,
+          twin_critics: bool | None, policy_delay: int | None, target_noise: float | None,
+          target_noise_clip: float | None, reset_between_episodes: bool | None,
           progress: bool) -> None:
     """Train DDPG agents; run under `mpiexec -n N` for N parallel agents (the paper: 32)."""
+    import dataclasses
+
     from dlo_course import mpi
     from dlo_course.trainer import preset, train as run_training
 
@@ -145,11 +221,19 @@ def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int
         env_kwargs["n_nodes"] = nodes
     overrides = {name: value for name, value in [
         ("env_id", env_id), ("episodes", episodes), ("steps_per_episode", steps_per_episode),
-        ("reduce", reduce), ("checkpoint_every", checkpoint_every)] if value is not None}
+        ("reduce", reduce), ("checkpoint_every", checkpoint_every),
+        ("updates_per_step", updates_per_step), ("her_k", her_k),
+        ("reset_between_episodes", reset_between_episodes)] if value is not None}
+    ddpg_overrides = {name: value for name, value in [
+        ("batch_size", batch_size), ("twin_critics", twin_critics),
+        ("policy_delay", policy_delay), ("target_noise", target_noise),
+        ("target_noise_clip", target_noise_clip)] if value is not None}
     if out is None:
         nodes_part = f"_n{env_kwargs['n_nodes']}" if "n_nodes" in env_kwargs else ""
         out = Path("runs") / f"{preset_name}_{env_id or base.env_id}{nodes_part}_seed{seed}"
     try:
+        if ddpg_overrides:
+            overrides["ddpg"] = dataclasses.replace(base.ddpg, **ddpg_overrides)
         config = preset(preset_name, env_kwargs=env_kwargs, seed=seed, out_dir=str(out),
                         **overrides)
         run_dir = run_training(config, resume=resume, progress=progress, overwrite=overwrite)
@@ -182,7 +266,9 @@ def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...]) -> None
 @click.option("--checkpoint", type=click.Path(path_type=Path), required=True,
               help="Run directory holding actor.pt (or the actor.pt file).")
 @click.option("--database", "goals", default="small", show_default=True,
-              help="Goals: 'small', 'large', a database .npz, or a .npy array (K, nodes, 3).")
+              help="Goals: 'small-test' or 'large-test' (the goals of the paper's Table I), "
+                   "'small' or 'large' (the whole database), a database .npz, or a .npy "
+                   "array (K, nodes, 3).")
 @click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=0.05,
               show_default=True, help="Success distance (m).")
 @click.option("--no-reinit", is_flag=True,
@@ -302,7 +388,7 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
               help="Actions per test episode (default 30, as in the paper).")
 @click.option("--train", "retrain", is_flag=True,
               help="Train the three agents with --preset first, instead of using checkpoints.")
-@click.option("--preset", "preset_name", type=click.Choice(["smoke", "laptop", "course", "paper"]),
+@click.option("--preset", "preset_name", type=PresetChoice(),
               default=None, help="Trainer preset for --train. 'smoke' alone runs the whole "
                                  "pipeline in minutes (tiny training, 2 episodes per setting).")
 @click.option("--seed", type=int, default=0, show_default=True)
@@ -319,7 +405,8 @@ def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_ste
         raise click.UsageError("--preset chooses how to retrain: add --train "
                                "(only 'smoke' implies it)")
     if retrain and preset_name is None:
-        raise click.UsageError("--train needs --preset smoke|laptop|course|paper")
+        raise click.UsageError("--train needs --preset "
+                               + "|".join(PresetChoice().choices))
     if retrain and checkpoints is not None:
         raise click.UsageError("--train writes new checkpoints; drop --checkpoints")
     episodes = episodes or (2 if smoke else 20)

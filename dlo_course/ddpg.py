@@ -17,6 +17,18 @@ One update (:meth:`DDPG.update`) on a batch of transitions (s, a, r, s', d) does
 Steps 1-4 are written as small pure functions (:func:`bellman_target`, :func:`critic_loss`,
 :func:`policy_loss`, :func:`polyak_update`) that the lessons ask you to write yourself.
 
+Three fixes of TD3 (Fujimoto et al. 2018, "Addressing Function Approximation Error in
+Actor-Critic Methods") are course options, off by default (the paper has none of them):
+
+* ``twin_critics`` (clipped double Q): two critics learn the same target, and the target uses
+  the smaller of their two target values, ``min(Q'_1, Q'_2)``, which counters the critic's
+  tendency to overestimate the actions the actor picks;
+* ``policy_delay``: the actor and the targets are updated once every d critic updates, so the
+  actor follows a critic that has had time to settle;
+* ``target_noise`` / ``target_noise_clip`` (target policy smoothing): the target action is
+  ``mu'(s')`` plus clipped Gaussian noise (:func:`smoothed_target_action`), so the target is
+  an average over nearby actions and a narrow peak of Q' cannot be exploited.
+
 Shapes: ``B`` is the batch size, ``obs_dim`` the observation length (18/30/42 for 2/4/6 rod
 nodes), ``act_dim`` the action length (3). Every Q-value tensor has shape (B, 1), and so do
 rewards and done flags once inside :meth:`DDPG.update`.
@@ -75,6 +87,21 @@ class DDPGConfig:
     policy loss. A saturated tanh has no gradient, so an actor pushed to +-1 stays there;
     the penalty pulls it back where the critic's gradient can reach it."""
 
+    # --- TD3's fixes (Fujimoto et al. 2018), course options, off by default ---
+    twin_critics: bool = False
+    """Clipped double Q: train a second critic on the same target and build the target from
+    the smaller of the two target critics' values. ``critic.pt`` stays the first critic."""
+    policy_delay: int = 1
+    """Update the actor and all targets once every this many critic updates (1: every time,
+    as in DDPG; TD3: 2)."""
+    target_noise: float = 0.0
+    """Standard deviation of the Gaussian noise added to the target actor's action in the
+    Bellman target, in units of the normalised action [-1, 1] (0: none, as in DDPG; TD3:
+    0.2)."""
+    target_noise_clip: float = 0.5
+    """That noise is clipped to [-target_noise_clip, target_noise_clip] (normalised action
+    units; TD3: 0.5). Only used when ``target_noise`` > 0."""
+
     def __post_init__(self) -> None:
         self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)  # a list from JSON
         if self.batch_size < 1 or self.buffer_size < 1:
@@ -87,6 +114,11 @@ class DDPGConfig:
             raise ValueError("learning rates must be positive")
         if self.preactivation_l2 < 0:
             raise ValueError(f"preactivation_l2 must be >= 0, got {self.preactivation_l2}")
+        if self.policy_delay < 1:
+            raise ValueError(f"policy_delay must be at least 1, got {self.policy_delay}")
+        if self.target_noise < 0 or not self.target_noise_clip > 0:
+            raise ValueError(f"target_noise must be >= 0 and target_noise_clip > 0, got "
+                             f"{self.target_noise} and {self.target_noise_clip}")
 
 
 # --- the pieces of one update, as pure functions ---
@@ -150,6 +182,26 @@ def preactivation_penalty(u: torch.Tensor, weight: float) -> torch.Tensor:
         A scalar tensor.
     """
     return weight * (u ** 2).mean()
+
+
+def smoothed_target_action(action: torch.Tensor, noise: torch.Tensor, noise_clip: float,
+                           action_scale: torch.Tensor, action_bias: torch.Tensor
+                           ) -> torch.Tensor:
+    """TD3's target policy smoothing: a' = clip(mu'(s') + scale * clip(eps, -c, c), low, high).
+
+    Args:
+        action: (B, act_dim) the target actor's actions mu'(s'), inside [low, high].
+        noise: (B, act_dim) the noise eps, in units of the normalised action [-1, 1].
+        noise_clip: c, the largest noise kept (``DDPGConfig.target_noise_clip``).
+        action_scale, action_bias: (act_dim,) the actor's scaling of [-1, 1] onto
+            [low, high] (:class:`Actor`): low = bias - scale, high = bias + scale.
+
+    Returns:
+        (B, act_dim) the smoothed target actions, inside [low, high].
+    """
+    eps = noise.clamp(-noise_clip, noise_clip)
+    return torch.clamp(action + action_scale * eps, action_bias - action_scale,
+                       action_bias + action_scale)
 
 
 @torch.no_grad()
@@ -314,6 +366,9 @@ GradReducer = Callable[[nn.Module], None]
 class DDPG:
     """A DDPG agent: actor, critic, their targets and their Adam optimisers.
 
+    With ``config.twin_critics`` (TD3) it also holds ``critic2``, its target and optimiser;
+    otherwise those attributes are ``None``.
+
     Args:
         obs_dim: observation length.
         act_dim: action length.
@@ -336,17 +391,34 @@ class DDPG:
                            cfg.final_init, obs_offset, obs_scale)
         self.critic = Critic(obs_dim, act_dim, cfg.hidden_sizes, cfg.final_init,
                              obs_offset, obs_scale)
+        # Created after the first critic, so that the actor and the first critic start from
+        # the same weights with or without it.
+        self.critic2 = (Critic(obs_dim, act_dim, cfg.hidden_sizes, cfg.final_init,
+                               obs_offset, obs_scale) if cfg.twin_critics else None)
         # Targets start as exact copies and are only ever changed by polyak_update.
         self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)
+        self.critic2_target = (None if self.critic2 is None
+                               else copy.deepcopy(self.critic2).requires_grad_(False))
         self.actor_optimizer = torch.optim.Adam(self.actor.parameters(), lr=cfg.actor_lr)
         self.critic_optimizer = torch.optim.Adam(self.critic.parameters(), lr=cfg.critic_lr)
+        self.critic2_optimizer = (None if self.critic2 is None
+                                  else torch.optim.Adam(self.critic2.parameters(),
+                                                        lr=cfg.critic_lr))
+        self.updates = 0  # critic updates so far; policy_delay counts them
+
+    @property
+    def critics(self) -> list[Critic]:
+        """The trained critics: ``[critic]``, or ``[critic, critic2]`` with twin critics."""
+        return [self.critic] if self.critic2 is None else [self.critic, self.critic2]
 
     def sync_targets(self) -> None:
         """Make the targets exact copies of the networks again (after they were replaced,
         e.g. by an MPI broadcast)."""
         self.actor_target.load_state_dict(self.actor.state_dict())
         self.critic_target.load_state_dict(self.critic.state_dict())
+        if self.critic2 is not None:
+            self.critic2_target.load_state_dict(self.critic2.state_dict())
 
     @torch.no_grad()
     def act(self, obs: np.ndarray, noise: Any = None) -> np.ndarray:
@@ -372,22 +444,50 @@ class DDPG:
         high = self.actor.action_bias.numpy() + scale
         return np.clip(action, low, high).astype(np.float32)
 
+    @torch.no_grad()
+    def target_value(self, next_obs: torch.Tensor) -> torch.Tensor:
+        """Q'(s', a') in the Bellman target, with a' = mu'(s') (DDPG).
+
+        With TD3's options: a' is smoothed (``target_noise``, :func:`smoothed_target_action`)
+        and Q' is the smaller of the two target critics (``twin_critics``).
+
+        Args:
+            next_obs: (B, obs_dim) next observations s'.
+
+        Returns:
+            (B, 1) target values, without gradient.
+        """
+        cfg = self.config
+        next_act = self.actor_target(next_obs)
+        if cfg.target_noise > 0:  # TD3: target policy smoothing
+            noise = cfg.target_noise * torch.randn_like(next_act)
+            next_act = smoothed_target_action(next_act, noise, cfg.target_noise_clip,
+                                              self.actor.action_scale, self.actor.action_bias)
+        next_q = self.critic_target(next_obs, next_act)
+        if self.critic2_target is not None:  # TD3: clipped double Q
+            next_q = torch.min(next_q, self.critic2_target(next_obs, next_act))
+        return next_q
+
     def update(self, batch: Mapping[str, Any], grad_reducer: GradReducer | None = None
                ) -> dict[str, float]:
         """One DDPG update: critic step, actor step, soft update of both targets.
+
+        With TD3's options, the second critic takes a step after the first, and the actor
+        step and the soft updates happen only on every ``policy_delay``-th update.
 
         Args:
             batch: arrays or tensors (as from :meth:`ReplayBuffer.sample`): ``obs``
                 (B, obs_dim), ``act`` (B, act_dim), ``rew`` (B,), ``next_obs`` (B, obs_dim),
                 ``done`` (B,).
-            grad_reducer: called with the critic, then with the actor, after ``backward()``
-                and before the optimiser step. With MPI it sums (or averages) the gradients of
-                all agents, so that every agent takes the same step
-                (:func:`dlo_course.mpi.allreduce_gradients`).
+            grad_reducer: called with each module after its ``backward()`` and before its
+                optimiser step: the critic (then the second critic, if any), then the actor.
+                With MPI it sums (or averages) the gradients of all agents, so that every
+                agent takes the same step (:func:`dlo_course.mpi.allreduce_gradients`).
 
         Returns:
-            Scalars for logging: ``critic_loss``, ``policy_loss`` and ``q_mean`` (mean Q(s, a)
-            of the batch).
+            Scalars for logging: ``critic_loss`` (the first critic's), ``q_mean`` (mean
+            Q(s, a) of the batch, first critic) and ``policy_loss``, the last only when the
+            actor was updated (always, unless ``policy_delay`` > 1).
         """
         cfg = self.config
         obs, act, next_obs = (torch.as_tensor(batch[k], dtype=torch.float32)
@@ -398,15 +498,17 @@ class DDPG:
 
         # 1-2. Critic: regress Q(s, a) on the Bellman target built from the target networks.
         with torch.no_grad():
-            next_q = self.critic_target(next_obs, self.actor_target(next_obs))
-            q_target = bellman_target(rew, next_q, done, cfg.gamma)
+            q_target = bellman_target(rew, self.target_value(next_obs), done, cfg.gamma)
         q = self.critic(obs, act)
         loss_q = critic_loss(q, q_target)
-        self.critic_optimizer.zero_grad()
-        loss_q.backward()
-        if grad_reducer is not None:
-            grad_reducer(self.critic)
-        self.critic_optimizer.step()
+        self._step(self.critic, self.critic_optimizer, loss_q, grad_reducer)
+        if self.critic2 is not None:  # TD3: the second critic learns the same target
+            loss_q2 = critic_loss(self.critic2(obs, act), q_target)
+            self._step(self.critic2, self.critic2_optimizer, loss_q2, grad_reducer)
+        self.updates += 1
+        stats = {"critic_loss": loss_q.item(), "q_mean": q.mean().item()}
+        if self.updates % cfg.policy_delay != 0:
+            return stats  # TD3: the actor and the targets wait for the critics to settle
 
         # 3. Actor: follow the (just updated) critic uphill. The critic is frozen meanwhile:
         # the policy loss must move the actor only, and this skips its useless gradients.
@@ -415,38 +517,62 @@ class DDPG:
         loss_pi = policy_loss(self.critic(obs, self.actor.squash(u)))
         if cfg.preactivation_l2 > 0:  # course option, not in the paper
             loss_pi = loss_pi + preactivation_penalty(u, cfg.preactivation_l2)
-        self.actor_optimizer.zero_grad()
-        loss_pi.backward()
-        if grad_reducer is not None:
-            grad_reducer(self.actor)
-        self.actor_optimizer.step()
+        self._step(self.actor, self.actor_optimizer, loss_pi, grad_reducer)
         self.critic.requires_grad_(True)
 
         # 4. Targets trail the trained networks.
         polyak_update(self.actor_target, self.actor, cfg.tau)
         polyak_update(self.critic_target, self.critic, cfg.tau)
+        if self.critic2 is not None:
+            polyak_update(self.critic2_target, self.critic2, cfg.tau)
 
-        return {"critic_loss": loss_q.item(), "policy_loss": loss_pi.item(),
-                "q_mean": q.mean().item()}
+        stats["policy_loss"] = loss_pi.item()
+        return stats
+
+    @staticmethod
+    def _step(module: nn.Module, optimizer: torch.optim.Optimizer, loss: torch.Tensor,
+              grad_reducer: GradReducer | None) -> None:
+        """One gradient step of ``module`` on ``loss``, the gradient combined over agents."""
+        optimizer.zero_grad()
+        loss.backward()
+        if grad_reducer is not None:
+            grad_reducer(module)
+        optimizer.step()
 
     def state_dict(self) -> dict[str, Any]:
-        """A snapshot of the networks, targets and optimiser states (Adam's moments included).
+        """A snapshot of the networks, targets and optimiser states (Adam's moments included),
+        plus the second critic's with twin critics, and the update count (``policy_delay``).
 
         Deep-copied: PyTorch's ``state_dict()`` returns references to live tensors, and an
         optimiser loading them would share its moment estimates with this agent."""
-        return copy.deepcopy({
+        state = {
             "actor": self.actor.state_dict(),
             "critic": self.critic.state_dict(),
             "actor_target": self.actor_target.state_dict(),
             "critic_target": self.critic_target.state_dict(),
             "actor_optimizer": self.actor_optimizer.state_dict(),
             "critic_optimizer": self.critic_optimizer.state_dict(),
-        })
+            "updates": self.updates,
+        }
+        if self.critic2 is not None:
+            state.update(critic2=self.critic2.state_dict(),
+                         critic2_target=self.critic2_target.state_dict(),
+                         critic2_optimizer=self.critic2_optimizer.state_dict())
+        return copy.deepcopy(state)
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        if (self.critic2 is not None) != ("critic2" in state):
+            raise ValueError(f"twin critics mismatch: the saved agent has "
+                             f"{'two critics' if 'critic2' in state else 'one critic'}, "
+                             f"this one {'two' if self.critic2 is not None else 'one'}")
         self.actor.load_state_dict(state["actor"])
         self.critic.load_state_dict(state["critic"])
         self.actor_target.load_state_dict(state["actor_target"])
         self.critic_target.load_state_dict(state["critic_target"])
         self.actor_optimizer.load_state_dict(state["actor_optimizer"])
         self.critic_optimizer.load_state_dict(state["critic_optimizer"])
+        if self.critic2 is not None:
+            self.critic2.load_state_dict(state["critic2"])
+            self.critic2_target.load_state_dict(state["critic2_target"])
+            self.critic2_optimizer.load_state_dict(state["critic2_optimizer"])
+        self.updates = int(state.get("updates", 0))  # absent in checkpoints older than TD3

@@ -27,6 +27,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from dlo_course.database import resolve_goals
 from dlo_course.mesh import selected_nodes
 from dlo_course.simulation import RodScene, SimParams
 
@@ -36,8 +37,11 @@ class DLOShapeEnv(gym.Env):
 
     Args:
         n_nodes: number of selected nodes, 2, 4 or 6 (the paper's three trainings).
-        goals: "small" or "large" (the paper's deformation databases), or an array of shape
-            (K, n_nodes, 3) of desired node positions in metres, world frame.
+        goals: where the desired shapes come from (:func:`dlo_course.database.resolve_goals`):
+            "small" or "large" (every record of the paper's deformation databases),
+            "small-test" or "large-test" (the goals the paper's Table I was measured on),
+            a database or goal file path, or an array (K, n_nodes, 3) of desired node
+            positions in metres, world frame.
         threshold: success distance (m); the paper trains at 0.05 and tests at 0.05 and 0.03.
         max_episode_steps: truncate after this many actions. ``gymnasium.make`` applies its
             own limit (300 for ``DLOShape-v0``, the paper's training episode); pass it there.
@@ -46,6 +50,10 @@ class DLOShapeEnv(gym.Env):
         time_mode: "code" (3 ms of physics per action, the authors' code, default) or
             "paper" (0.06 s per action, 20 times slower); overrides ``params.time_mode``.
         params: all physical and timing parameters (:class:`SimParams`); paper defaults.
+
+    Every reset lets the world settle before the first observation, as the authors' reset
+    did: ``params.reset_steps(n_nodes, rebuilt)`` physics steps (12 + m, plus 8 after a
+    rebuild; :class:`SimParams` ``reset_settle_steps`` and ``rebuild_settle_steps``).
 
     Reset options:
         ``{"reinitialize": True}`` (default) rebuilds the initial scene;
@@ -82,12 +90,7 @@ class DLOShapeEnv(gym.Env):
         if time_mode is not None:
             params = params.with_(time_mode=time_mode)
         self.params = params
-        if isinstance(goals, str):
-            from dlo_course.database import load_database
-
-            self.goal_set = load_database(goals).goals(n_nodes)
-        else:
-            self.goal_set = goal_array(goals, n_nodes)
+        self.goal_set = resolve_goals(goals, n_nodes)
 
         # Generous finite bounds: positions within 10 m of the origin, tip speed below
         # 100 m/s. Observations are clipped to them, so they always lie in the space.
@@ -113,11 +116,14 @@ class DLOShapeEnv(gym.Env):
         if unknown:
             raise ValueError(f"unknown reset options {sorted(unknown)}; "
                              "use 'reinitialize' and/or 'goal_index'")
-        if options.get("reinitialize", True) or self._last_obs is None or self._broken:
+        rebuilt = bool(options.get("reinitialize", True) or self._last_obs is None
+                       or self._broken)
+        if rebuilt:
             if not self._fresh:
                 self.scene.build()
             self._broken = False
         self._fresh = False
+        self.scene.step_physics(self.params.reset_steps(self.n_nodes, rebuilt))
         if "goal_index" in options:
             index = int(options["goal_index"])
             if not 0 <= index < len(self.goal_set):
@@ -220,20 +226,3 @@ class DLOShapeEnv(gym.Env):
 def mean_node_distance(current: np.ndarray, desired: np.ndarray) -> float:
     """Mean Euclidean distance (m) between node positions P_c and P_d, both (m, 3)."""
     return float(np.mean(np.linalg.norm(np.asarray(current) - np.asarray(desired), axis=-1)))
-
-
-def goal_array(goals: np.ndarray, n_nodes: int) -> np.ndarray:
-    """Check and return desired positions as a float64 array (K, n_nodes, 3).
-
-    A single goal of shape (n_nodes, 3) becomes (1, n_nodes, 3); anything else of the wrong
-    shape, empty, or non-finite raises ``ValueError``.
-    """
-    array = np.asarray(goals, dtype=np.float64)
-    if array.ndim == 2 and array.shape == (n_nodes, 3):
-        array = array[None]  # a single goal
-    if array.ndim != 3 or array.shape[1:] != (n_nodes, 3) or len(array) == 0:
-        raise ValueError(f"goals must have shape (K, {n_nodes}, 3) for n_nodes={n_nodes}, "
-                         f"got {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError("goals must be finite")
-    return array

@@ -153,26 +153,6 @@ def load_actor(checkpoint: str | Path, n_nodes: int | None = None):
 
 
 # ------------------------------------------------------------------------------ goals
-def load_goals(source: str | Path | np.ndarray, n_nodes: int) -> np.ndarray:
-    """Goal shapes (K, n_nodes, 3) from "small", "large", a database ``.npz``, a ``.npy``
-    array of shape (K, n_nodes, 3), or an ``.npz`` holding such an array as ``goals``."""
-    from dlo_course.database import load_database
-    from dlo_course.env import goal_array
-
-    if isinstance(source, np.ndarray):
-        return goal_array(source, n_nodes)
-    path = Path(source)
-    if path.suffix == ".npy":
-        if not path.is_file():
-            raise FileNotFoundError(f"no goal file at {path}")
-        return goal_array(np.load(path, allow_pickle=False), n_nodes)
-    if path.suffix == ".npz" and path.is_file():
-        with np.load(path, allow_pickle=False) as data:
-            if "goals" in data.files and "nodes" not in data.files:
-                return goal_array(data["goals"], n_nodes)
-    return load_database(path).goals(n_nodes)
-
-
 def goal_schedule(n_goals: int, episodes: int, seed: int) -> np.ndarray:
     """(episodes,) goal index of every test episode, drawn uniformly from the seed."""
     return np.random.default_rng(seed).integers(n_goals, size=episodes)
@@ -278,6 +258,7 @@ def evaluate(checkpoint: str | Path, goals: str | Path | np.ndarray = "small",
     from tqdm.auto import tqdm
 
     from dlo_course import mpi
+    from dlo_course.database import resolve_goals
     from dlo_course.env import DLOShapeEnv
 
     if episodes < 1:
@@ -285,7 +266,7 @@ def evaluate(checkpoint: str | Path, goals: str | Path | np.ndarray = "small",
     if max_steps < 1:
         raise ValueError(f"max_steps must be at least 1, got {max_steps}")
     actor, n_nodes = load_actor(checkpoint, n_nodes)
-    goal_set = load_goals(goals, n_nodes)
+    goal_set = resolve_goals(goals, n_nodes)
     schedule = goal_schedule(len(goal_set), episodes, seed)
     rank, size = mpi.rank(), mpi.size()
     mine = list(range(rank, episodes, size))

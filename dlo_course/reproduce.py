@@ -206,6 +206,13 @@ def ship_run(run_dir: Path, dest: Path, **extra: Any) -> Path:
     return dest
 
 
+def database_protocols() -> str:
+    """How each database was recorded, for the report (e.g. "small: authors_sweep, ...")."""
+    from dlo_course.database import BOXES, load_database
+
+    return ", ".join(f"{name}: {load_database(name).protocol} protocol" for name in BOXES)
+
+
 def plot_deformation(checkpoints: Path, out: Path, n_nodes: int = 4, seed: int = 0,
                      max_steps: int = 30, time_mode: str = "code") -> Path:
     """The paper's Fig. 5: the agent deforms the rod to a goal outside its training box."""
@@ -319,6 +326,7 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 20,
         f"Time per action: `{time_mode}` ("
         + ("3 ms of physics per action, as in the authors' code" if time_mode == "code"
            else "0.06 s of physics per action, as in the paper's text") + ").",
+        "Goals: drawn uniformly from the whole database, " + database_protocols() + ".",
         "",
         "## Training budgets (the paper: 32 agents x 63 episodes x 300 steps = 604 800 "
         "transitions, gradients summed, under 3.5 h on 32 cores)",

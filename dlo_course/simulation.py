@@ -106,6 +106,12 @@ class SimParams:
     """Collision margin of the rod (m), as in the authors' code."""
     self_collision: bool = True
     """Rod self-collision, as in the authors' code."""
+    edge_damping: float = 1.0
+    """Damping (N s/m) of a dashpot along every mesh edge (PyBullet's mass-spring force, with
+    1 N/m springs). Not in the paper or the authors' scene: every rod this course built before
+    issue 10 had it without asking (PyBullet read the previous joint-motor command's gains as
+    spring constants; docs/design.md, "Scene speed"). 1.0 keeps that physics, which the
+    databases and shipped agents were made with; 0 is the authors' rod, 1.5x faster to step."""
     mesh_path: Path | None = None
     """Legacy VTK mesh. None: ``data/rod.vtk`` for the paper's rod (written on first use if
     missing), or a mesh generated for a non-default ``length`` / ``radius``."""
@@ -140,6 +146,15 @@ class SimParams:
     sub_steps: int = 20
     """Sub-steps per ``stepSimulation()`` call: 0.003 s / 20 = 0.15 ms, a stable sub-step."""
 
+    # --- resets (the authors' code) ---
+    reset_settle_steps: int | None = None
+    """Physics steps at every environment reset before the first observation. None: the
+    authors' 1 + m + 1 + 10 = 12 + m for m selected nodes (their reset stepped the world once
+    per goal cross it drew, and more; FACTS.md), about 40 ms of rest for the rod."""
+    rebuild_settle_steps: int = 8
+    """Physics steps added when a reset rebuilds the world (the authors' rebuild stepped it
+    about 8 more times)."""
+
     # --- safety ---
     max_node_distance: float = 5.0
     """A node farther than this from the tip (m) means the simulation has blown up."""
@@ -152,6 +167,12 @@ class SimParams:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         if self.sub_steps < 1:
             raise ValueError(f"sub_steps must be >= 1, got {self.sub_steps}")
+        if not self.edge_damping >= 0:
+            raise ValueError(f"edge_damping must be >= 0, got {self.edge_damping}")
+        if self.reset_settle_steps is not None and self.reset_settle_steps < 0:
+            raise ValueError(f"reset_settle_steps must be >= 0, got {self.reset_settle_steps}")
+        if self.rebuild_settle_steps < 0:
+            raise ValueError(f"rebuild_settle_steps must be >= 0, got {self.rebuild_settle_steps}")
         if len(self.initial_joints) != 7:
             raise ValueError("initial_joints needs the 7 arm joint angles")
         lame_parameters(self.youngs_modulus, self.poisson_ratio)  # validates E and nu
@@ -167,6 +188,11 @@ class SimParams:
     def physics_time_per_action(self) -> float:
         """Seconds of simulated physics per action: 0.003 ("code") or 0.06 ("paper")."""
         return self.steps_per_action * self.time_step
+
+    def reset_steps(self, n_nodes: int, rebuilt: bool) -> int:
+        """Physics steps of an environment reset with ``n_nodes`` selected nodes."""
+        steps = 12 + n_nodes if self.reset_settle_steps is None else self.reset_settle_steps
+        return steps + (self.rebuild_settle_steps if rebuilt else 0)
 
     @property
     def lame(self) -> tuple[float, float]:
@@ -252,7 +278,8 @@ class RodScene:
                 scale=1.0, mass=prm.mass, useNeoHookean=1, NeoHookeanMu=mu,
                 NeoHookeanLambda=lam, NeoHookeanDamping=prm.damping,
                 useSelfCollision=int(prm.self_collision), frictionCoeff=prm.friction,
-                collisionMargin=prm.collision_margin, physicsClientId=c)
+                collisionMargin=prm.collision_margin, physicsClientId=c,
+                **edge_spring_args(prm.edge_damping))
         p.changeVisualShape(self.rod, -1, rgbaColor=[0.2, 0.75, 0.3, 1.0], physicsClientId=c)
         # A pedestal for the robot, for the pictures only: no collision shape, no mass.
         height = prm.panda_base[2]
@@ -356,6 +383,27 @@ class RodScene:
         self.timings.physics += time.perf_counter() - t
         self.timings.actions += 1
 
+    def tip_orientation_now(self) -> tuple[float, float, float, float]:
+        """The tip's current orientation quaternion (x, y, z, w), as the arm holds it now."""
+        return p.getLinkState(self.panda, self.params.tip_link, computeForwardKinematics=True,
+                              physicsClientId=self.client)[5]
+
+    def command_tip_plain_ik(self, target: np.ndarray) -> None:
+        """Set the arm's joint targets for tip ``target`` (3,) the way the authors' sweep did:
+        PyBullet's default IK, no null-space pull, with the tip's *current* orientation.
+        Nothing is stepped; :meth:`step_physics` lets the arm move."""
+        joints = p.calculateInverseKinematics(
+            self.panda, self.params.tip_link, list(target), self.tip_orientation_now(),
+            physicsClientId=self.client)
+        self._set_arm_targets(joints[:7])
+
+    def step_physics(self, n: int = 1) -> None:
+        """Call ``stepSimulation()`` ``n`` times: n x 3 ms of physics, whatever the time mode."""
+        t = time.perf_counter()
+        for _ in range(n):
+            p.stepSimulation(physicsClientId=self.client)
+        self.timings.physics += time.perf_counter() - t
+
     def _set_arm_targets(self, joints) -> None:
         p.setJointMotorControlArray(
             self.panda, list(self.ARM_JOINTS), p.POSITION_CONTROL,
@@ -406,6 +454,27 @@ def _draw_crosses(image: np.ndarray, pixels: np.ndarray, colour, size: int = 6) 
                     px, py = x + dx + t, y + dy
                     if 0 <= px < w and 0 <= py < h:
                         image[py, px] = colour
+
+
+EDGE_SPRING_STIFFNESS = 1.0
+"""Stiffness (N/m) of the springs that carry :attr:`SimParams.edge_damping`. PyBullet adds its
+mass-spring force only for a positive stiffness; at 1 N/m, against a 2.5 MPa rod, the springs
+themselves move no node by more than 0.1 mm in 60 actions (measured), the dampers do."""
+
+
+def edge_spring_args(edge_damping: float) -> dict:
+    """The mass-spring arguments of ``loadSoftBody`` for a rod with ``edge_damping``.
+
+    Always passed, even for no dampers: PyBullet 3.2.7's server takes a soft body's spring
+    stiffnesses from its shared command buffer whether or not ``useMassSpring`` was asked
+    for, so a rod loaded right after ``setJointMotorControlArray`` silently got that
+    command's default joint gain (1.0) as edge springs and dampers (docs/design.md, "Scene
+    speed"). Writing the values ourselves makes the rod independent of the calls before it.
+    """
+    return dict(useMassSpring=1,
+                springElasticStiffness=EDGE_SPRING_STIFFNESS if edge_damping > 0 else 0.0,
+                springDampingStiffness=float(edge_damping), springDampingAllDirections=0,
+                useBendingSprings=0, springBendingStiffness=0.0)
 
 
 def ensure_mesh(params: SimParams) -> Path:

@@ -7,10 +7,13 @@ all-reduced gradient at every update (see :mod:`dlo_course.mpi`).
 
 One episode of one agent:
 
-    reset the environment (a new goal) and the OU noise
+    reset the environment (a new goal; the world rebuilt, or the rod's shape kept if
+        reset_between_episodes is False) and the OU noise
     repeat at most steps_per_episode times:
         act with the actor + noise, step the environment, store the transition
-        once every agent's buffer holds a batch: one DDPG update (gradients all-reduced)
+        when this agent's episode ends: store its hindsight copies (if her_k > 0)
+        once every agent's buffer holds a batch: updates_per_step DDPG updates
+            (gradients all-reduced)
         stop when the episode ends (terminated or truncated) for *every* agent
 
 An agent whose episode ended early keeps making updates (from its own buffer) until the
@@ -21,7 +24,8 @@ Rank 0 writes, in ``out_dir``:
 
 * ``config.json``: the configuration, number of agents and library versions;
 * ``progress.csv``: one row per episode (all agents together; see :data:`PROGRESS_COLUMNS`);
-* ``actor.pt``, ``critic.pt``: the latest networks (:func:`dlo_course.ddpg.load_network`);
+* ``actor.pt``, ``critic.pt``: the latest networks (:func:`dlo_course.ddpg.load_network`;
+  with twin critics, ``critic.pt`` is the first one);
 * ``checkpoints/``: every ``checkpoint_every`` episodes, the full state of the run, so that
   ``train(config, resume=True)`` continues a killed run and gives the same result as a run
   that was never interrupted.
@@ -51,6 +55,7 @@ from tqdm.auto import tqdm
 
 from dlo_course import mpi
 from dlo_course.ddpg import DDPG, DDPGConfig, save_network
+from dlo_course.her import HindsightRelabeller
 from dlo_course.noise import OUNoise
 from dlo_course.replay_buffer import ReplayBuffer
 
@@ -83,6 +88,18 @@ class TrainConfig:
     updates_per_step: int = 1
     """DDPG updates per environment step (the paper and the authors' code: 1). More reuse
     each costly simulator transition; an update costs a few ms, a rod step ~110 ms."""
+    her_k: int = 0
+    """Hindsight relabelling (HER, "future" strategy; :mod:`dlo_course.her`): at the end of
+    each episode, store every transition again this many times, each time with a goal the
+    rod reached later in that episode (0: off, as in the paper; the HER paper: 4). Needs a
+    goal-reaching environment such as ``DLOShape-v0``. A trainer option rather than a DDPG
+    one: it changes what is stored, and only the trainer knows episodes and the environment's
+    observation layout and threshold; the DDPG update never sees the difference."""
+    reset_between_episodes: bool = True
+    """True: rebuild the world before every training episode (the paper's text). False: a
+    training episode starts from the shape the previous one ended in and only a new goal is
+    drawn (the authors' code). The first episode, and any after a simulation blow-up, start
+    from a rebuilt world anyway. False needs ``DLOShape-v0``, whose reset can keep the shape."""
     torch_threads: int = 1
     """PyTorch threads per process. One: the ranks already fill the cores, and more threads
     per rank would fight over them."""
@@ -103,6 +120,8 @@ class TrainConfig:
             raise ValueError(f"reduce must be 'sum' or 'mean', got {self.reduce!r}")
         if self.updates_per_step < 1:
             raise ValueError(f"updates_per_step must be at least 1, got {self.updates_per_step}")
+        if self.her_k < 0:
+            raise ValueError(f"her_k must be >= 0 (0: no hindsight relabelling), got {self.her_k}")
         if self.warmup is not None and self.warmup < 1:
             raise ValueError(f"warmup must be at least 1, got {self.warmup}")
         if "max_episode_steps" in self.env_kwargs:
@@ -135,11 +154,24 @@ PRESETS: dict[str, TrainConfig] = {
                           out_dir="runs/course", expected_agents=2, updates_per_step=2,
                           ddpg=DDPGConfig(normalize_obs=True, preactivation_l2=0.01,
                                           noise_sigma=0.15)),
+    # PROVISIONAL, a first guess to be tuned by the ablation of issue 12: the course preset's
+    # options on the 4-node task, plus every training lever at once (docs/design.md,
+    # "Training levers"): hindsight relabelling, TD3's three fixes, episodes that keep the
+    # rod's shape (the authors' code), bigger batches and buffer. 30 000 rod transitions per
+    # agent: at ~16 transitions/s on 2 cores, about an hour of simulation plus the updates.
+    "recipe": TrainConfig(env_kwargs={"n_nodes": 4}, episodes=500, steps_per_episode=60,
+                          checkpoint_every=10, out_dir="runs/recipe", expected_agents=2,
+                          updates_per_step=2, her_k=4, reset_between_episodes=False,
+                          ddpg=DDPGConfig(normalize_obs=True, preactivation_l2=0.01,
+                                          noise_sigma=0.15, batch_size=256,
+                                          buffer_size=200_000, twin_critics=True,
+                                          policy_delay=2, target_noise=0.1,
+                                          target_noise_clip=0.3)),
 }
 
 
 def preset(name: str, **overrides: Any) -> TrainConfig:
-    """A copy of preset ``name`` ("smoke", "laptop" or "paper") with some fields changed."""
+    """A copy of preset ``name`` (a key of :data:`PRESETS`) with some fields changed."""
     if name not in PRESETS:
         raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
     return dataclasses.replace(copy.deepcopy(PRESETS[name]), **overrides)
@@ -176,41 +208,87 @@ def _episode_seed(agent_seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([agent_seed, episode]).generate_state(1)[0])
 
 
+def reset_options(env: gymnasium.Env, config: TrainConfig) -> dict[str, Any] | None:
+    """The ``options`` of a training episode's ``env.reset``: ``None`` (rebuild the world, the
+    environment's default) or, with ``reset_between_episodes=False``, keep the rod's shape.
+
+    Raises ``ValueError`` if the shape should be kept but the environment is not the rod's,
+    whose reset alone knows the ``reinitialize`` option."""
+    if config.reset_between_episodes:
+        return None
+    from dlo_course.env import DLOShapeEnv  # imports PyBullet: only when needed
+
+    if not isinstance(env.unwrapped, DLOShapeEnv):
+        raise ValueError(f"reset_between_episodes=False (keep the shape between episodes) "
+                         f"needs DLOShape-v0, whose reset can keep the rod's shape; "
+                         f"{config.env_id} cannot")
+    return {"reinitialize": False}
+
+
+def _add_hindsight_copies(buffer: ReplayBuffer, relabeller: HindsightRelabeller,
+                          episode: list[tuple[np.ndarray, np.ndarray, float, np.ndarray]]
+                          ) -> None:
+    """Store the relabelled copies of an episode's (obs, action, reward, next_obs) list."""
+    if not episode:
+        return
+    obs, act, rew, next_obs = (np.asarray(column) for column in zip(*episode))
+    copies = relabeller.episode_copies(obs, act, rew, next_obs)
+    for i in range(len(copies["rew"])):
+        buffer.add(copies["obs"][i], copies["act"][i], copies["rew"][i],
+                   copies["next_obs"][i], copies["done"][i])
+
+
 def run_episode(env: gymnasium.Env, agent: DDPG, buffer: ReplayBuffer, noise: OUNoise,
-                config: TrainConfig, seed: int, grad_reducer: Any) -> dict[str, float]:
+                config: TrainConfig, seed: int, grad_reducer: Any,
+                relabeller: HindsightRelabeller | None = None) -> dict[str, float]:
     """Play one training episode, updating the networks on the way.
 
-    Every rank calls this in step with the others (see the module docstring).
+    Every rank calls this in step with the others (see the module docstring). With a
+    ``relabeller`` (``config.her_k`` > 0), the episode's transitions are also stored again
+    with hindsight goals as soon as this agent's episode is over.
 
     Returns:
         This agent's ``reward`` (sum over the episode), ``length``, final ``distance`` and
         ``success`` (NaN if the environment does not report them), number of ``updates``
         and the mean ``critic_loss``, ``policy_loss``, ``q_mean`` over its updates.
     """
+    if config.her_k > 0 and relabeller is None:
+        raise ValueError("her_k > 0 needs a HindsightRelabeller (see train)")
     warmup = config.warmup or config.ddpg.batch_size
-    obs, info = env.reset(seed=seed)
+    obs, info = env.reset(seed=seed, options=reset_options(env, config))
     noise.reset()
     total_reward, length, running = 0.0, 0, True
     stats: list[dict[str, float]] = []
+    episode = []  # (obs, action, reward, next_obs) of each step, for hindsight relabelling
     for _ in range(config.steps_per_episode):
         if running:
             action = agent.act(obs, noise)
             next_obs, reward, terminated, truncated, info = env.step(action)
             # done = terminated only: a time limit is not a terminal state (see ReplayBuffer.add).
             buffer.add(obs, action, reward, next_obs, terminated)
+            # A step where the simulation blew up repeats the last sane observation: it shows
+            # no shape the rod reached, so it is not relabelled.
+            if relabeller is not None and not info.get("simulation_unstable", False):
+                episode.append((obs, action, reward, next_obs))
             obs = next_obs
             total_reward += float(reward)
             length += 1
             running = not (terminated or truncated)
+            if not running and relabeller is not None:
+                _add_hindsight_copies(buffer, relabeller, episode)
         # Learn once every agent holds a batch; decided together because updates are collective.
         if mpi.allreduce_scalars(len(buffer), "min")[0] >= warmup:
             for _ in range(config.updates_per_step):
                 stats.append(agent.update(buffer.sample(config.ddpg.batch_size), grad_reducer))
         if mpi.allreduce_scalars(float(running), "max")[0] == 0.0:
             break  # every agent's episode is over
+    if running and relabeller is not None:  # cut by steps_per_episode, not by the environment
+        _add_hindsight_copies(buffer, relabeller, episode)
 
     def mean_of(key: str) -> float:
-        return float(np.mean([s[key] for s in stats])) if stats else math.nan
+        # policy_loss is missing from the updates that skipped the actor (policy_delay > 1)
+        values = [s[key] for s in stats if key in s]
+        return float(np.mean(values)) if values else math.nan
 
     return {
         "reward": total_reward,
@@ -272,7 +350,8 @@ def _write_json(obj: Any, path: Path) -> None:
 
 
 def _save_checkpoint(out: Path, agent: DDPG, buffer: ReplayBuffer, noise: OUNoise,
-                     counters: dict[str, Any], config: TrainConfig) -> None:
+                     relabeller: HindsightRelabeller | None, counters: dict[str, Any],
+                     config: TrainConfig) -> None:
     """Every rank saves its own state; rank 0 the shared networks and optimisers. The
     ``latest.json`` pointer moves only once every file is complete."""
     ckpt_root = out / "checkpoints"
@@ -282,6 +361,7 @@ def _save_checkpoint(out: Path, agent: DDPG, buffer: ReplayBuffer, noise: OUNois
         ckpt.mkdir(parents=True, exist_ok=True)
     mpi.barrier()
     _atomic_torch_save({"buffer": buffer.state_dict(), "noise": noise.state_dict(),
+                        "her": None if relabeller is None else relabeller.state_dict(),
                         "torch_rng": torch.get_rng_state()},
                        ckpt / f"state_rank{mpi.rank()}.pt")
     if mpi.is_root():
@@ -304,7 +384,8 @@ _RESUMABLE_CHANGES = {"episodes", "out_dir", "checkpoint_every", "expected_agent
 
 
 def _load_checkpoint(out: Path, agent: DDPG, buffer: ReplayBuffer, noise: OUNoise,
-                     config: TrainConfig) -> dict[str, Any] | None:
+                     relabeller: HindsightRelabeller | None, config: TrainConfig
+                     ) -> dict[str, Any] | None:
     """Restore the latest checkpoint of ``out`` into this rank's objects; return the counters,
     or ``None`` if there is no checkpoint."""
     pointer = out / "checkpoints" / "latest.json"
@@ -316,7 +397,9 @@ def _load_checkpoint(out: Path, agent: DDPG, buffer: ReplayBuffer, noise: OUNois
     if shared["n_agents"] != mpi.size():
         raise ValueError(f"{out} was trained with {shared['n_agents']} agents; resume it with "
                          f"the same number of MPI ranks (got {mpi.size()})")
-    saved, now = shared["config"], config.to_dict()
+    # Through the dataclass, so that an option added since the checkpoint reads as its
+    # default (off) instead of as a difference.
+    saved, now = TrainConfig.from_dict(shared["config"]).to_dict(), config.to_dict()
     changed = sorted(k for k in now if k not in _RESUMABLE_CHANGES and saved.get(k) != now[k])
     if changed:
         raise ValueError(f"cannot resume {out}: the configuration differs in {changed}")
@@ -324,6 +407,8 @@ def _load_checkpoint(out: Path, agent: DDPG, buffer: ReplayBuffer, noise: OUNois
     agent.load_state_dict(shared["agent"])
     buffer.load_state_dict(mine["buffer"])
     noise.load_state_dict(mine["noise"])
+    if relabeller is not None:
+        relabeller.load_state_dict(mine["her"])
     torch.set_rng_state(mine["torch_rng"])
     return dict(shared["counters"])
 
@@ -417,6 +502,13 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
     agent_seed = mpi.rank_seed(config.seed, mpi.rank())
     torch.manual_seed(agent_seed)  # network initialisation (rank 0's wins, see below)
     env = make_env(config)
+    try:  # options that need a particular environment: fail now, not after an episode
+        reset_options(env, config)
+        relabeller = (HindsightRelabeller.for_env(env, config.her_k, seed=agent_seed + 2)
+                      if config.her_k > 0 else None)
+    except ValueError:
+        env.close()
+        raise
     obs_dim, act_dim = env.observation_space.shape[0], env.action_space.shape[0]
     obs_offset, obs_scale = (observation_reference(env) if config.ddpg.normalize_obs
                              else (None, None))
@@ -428,12 +520,13 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
                     config.ddpg.noise_mu, seed=agent_seed + 1)
     # All agents start from rank 0's networks; the targets are copies of them.
     mpi.broadcast_module(agent.actor)
-    mpi.broadcast_module(agent.critic)
+    for critic in agent.critics:
+        mpi.broadcast_module(critic)
     agent.sync_targets()
 
     counters = {"episodes_done": 0, "transitions": 0, "updates": 0, "elapsed": 0.0}
     if resume:
-        loaded = _load_checkpoint(out, agent, buffer, noise, config)
+        loaded = _load_checkpoint(out, agent, buffer, noise, relabeller, config)
         if loaded is not None:
             counters = loaded
         elif root:
@@ -458,7 +551,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
     try:
         for episode in range(counters["episodes_done"], config.episodes):
             mine = run_episode(env, agent, buffer, noise, config,
-                               _episode_seed(agent_seed, episode), reducer)
+                               _episode_seed(agent_seed, episode), reducer, relabeller)
             per_agent = mpi.allgather(mine)  # every agent's stats, on every rank
             counters["episodes_done"] = episode + 1
             counters["updates"] += int(mine["updates"])  # identical on every rank
@@ -471,10 +564,10 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
                 bar.set_postfix(reward=f"{row['reward_mean']:.3g}")
                 bar.update(1)
             if (episode + 1) % config.checkpoint_every == 0 or episode + 1 == config.episodes:
-                if not mpi.modules_in_sync(agent.actor, agent.critic):
+                if not mpi.modules_in_sync(agent.actor, *agent.critics):
                     raise RuntimeError("the agents' networks have diverged: the MPI "
                                        "reduction did not give every rank the same bits")
-                _save_checkpoint(out, agent, buffer, noise, counters, config)
+                _save_checkpoint(out, agent, buffer, noise, relabeller, counters, config)
     finally:
         bar.close()
         env.close()

@@ -195,3 +195,167 @@ def test_preactivation_penalty_by_hand_and_in_the_update():
         assert (after < before - 0.1) == expect_shrink, (weight, before, after)
     with pytest.raises(ValueError):
         DDPGConfig(preactivation_l2=-1.0)
+
+
+# --- TD3's fixes (course options, off by default: the paper has none of them) ---
+
+TD3 = DDPGConfig(hidden_sizes=(16, 16), batch_size=8, twin_critics=True, policy_delay=2,
+                 target_noise=0.2, target_noise_clip=0.5)
+
+
+def paper_update(agent, batch):
+    """The paper's DDPG update written out plainly (the code before the TD3 options), on
+    ``agent``'s networks and optimisers."""
+    obs, act, next_obs = (torch.as_tensor(batch[k], dtype=torch.float32)
+                          for k in ("obs", "act", "next_obs"))
+    rew = torch.as_tensor(batch["rew"], dtype=torch.float32).reshape(-1, 1)
+    done = torch.as_tensor(batch["done"], dtype=torch.float32).reshape(-1, 1)
+    gamma, tau = agent.config.gamma, agent.config.tau
+    with torch.no_grad():
+        y = rew + gamma * agent.critic_target(next_obs, agent.actor_target(next_obs)) * (1 - done)
+    q = agent.critic(obs, act)
+    loss_q = ((q - y) ** 2).mean()
+    agent.critic_optimizer.zero_grad()
+    loss_q.backward()
+    agent.critic_optimizer.step()
+    agent.critic.requires_grad_(False)
+    loss_pi = -agent.critic(obs, agent.actor(obs)).mean()
+    agent.actor_optimizer.zero_grad()
+    loss_pi.backward()
+    agent.actor_optimizer.step()
+    agent.critic.requires_grad_(True)
+    with torch.no_grad():
+        for target, net in ((agent.actor_target, agent.actor), (agent.critic_target, agent.critic)):
+            for w_target, w in zip(target.parameters(), net.parameters()):
+                w_target.mul_(1 - tau).add_(w, alpha=tau)
+    return {"critic_loss": loss_q.item(), "policy_loss": loss_pi.item(), "q_mean": q.mean().item()}
+
+
+def test_with_the_options_off_the_update_is_the_papers_bit_for_bit():
+    import copy
+    torch.manual_seed(0)
+    agent = DDPG(5, 2, config=SMALL)
+    reference = copy.deepcopy(agent)  # same weights, its own optimisers
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        batch = random_batch(rng)
+        assert agent.update(batch) == paper_update(reference, batch)
+    for name in ("actor", "critic", "actor_target", "critic_target"):
+        for p, q in zip(getattr(agent, name).parameters(), getattr(reference, name).parameters()):
+            assert torch.equal(p, q), name
+
+
+def test_td3_options_are_off_by_default():
+    c = DDPGConfig()
+    assert (c.twin_critics, c.policy_delay, c.target_noise) == (False, 1, 0.0)
+    agent = DDPG(5, 2, config=SMALL)
+    assert agent.critic2 is None and agent.critics == [agent.critic]
+    assert not any(key.startswith("critic2") for key in agent.state_dict())
+    for bad in (dict(policy_delay=0), dict(target_noise=-0.1), dict(target_noise_clip=0.0)):
+        with pytest.raises(ValueError):
+            DDPGConfig(**bad)
+
+
+def test_twin_critics_target_is_the_min_of_the_two_target_critics():
+    torch.manual_seed(0)
+    agent = DDPG(5, 2, config=DDPGConfig(hidden_sizes=(16, 16), twin_critics=True))
+    next_obs = torch.randn(64, 5)
+    next_act = agent.actor_target(next_obs)
+    q1, q2 = agent.critic_target(next_obs, next_act), agent.critic2_target(next_obs, next_act)
+    assert (q1 < q2).any() and (q2 < q1).any()  # both critics are the smaller somewhere
+    torch.testing.assert_close(agent.target_value(next_obs), torch.min(q1, q2),
+                               rtol=0, atol=0)
+    # The second critic is made after the first: actor and first critic are the same as
+    # without it.
+    torch.manual_seed(0)
+    single = DDPG(5, 2, config=DDPGConfig(hidden_sizes=(16, 16)))
+    for a, b in ((agent.actor, single.actor), (agent.critic, single.critic)):
+        assert all(torch.equal(p, q) for p, q in zip(a.parameters(), b.parameters()))
+    assert not torch.equal(agent.critic.net[0].weight, agent.critic2.net[0].weight)
+
+
+def test_twin_critics_both_learn_and_are_saved():
+    torch.manual_seed(0)
+    cfg = DDPGConfig(hidden_sizes=(16, 16), batch_size=8, twin_critics=True)
+    agent = DDPG(5, 2, config=cfg)
+    before = [p.detach().clone() for p in agent.critic2.parameters()]
+    calls = []
+    agent.update(random_batch(np.random.default_rng(0)), grad_reducer=calls.append)
+    assert calls == [agent.critic, agent.critic2, agent.actor]
+    assert all(not torch.equal(p, q) for p, q in zip(before, agent.critic2.parameters()))
+    for t_new, p_new, t_old in zip(agent.critic2_target.parameters(), agent.critic2.parameters(),
+                                   before):  # the target started as a copy of the critic
+        torch.testing.assert_close(t_new, cfg.tau * p_new + (1 - cfg.tau) * t_old)
+
+    copy_ = DDPG(5, 2, config=cfg)
+    copy_.load_state_dict(agent.state_dict())
+    batch = random_batch(np.random.default_rng(1))
+    assert agent.update(batch) == copy_.update(batch)
+    for name in ("critic2", "critic2_target"):
+        for p, q in zip(getattr(agent, name).parameters(), getattr(copy_, name).parameters()):
+            assert torch.equal(p, q)
+    with pytest.raises(ValueError, match="twin critics"):
+        DDPG(5, 2, config=SMALL).load_state_dict(agent.state_dict())
+
+
+def test_policy_delay_skips_actor_and_target_updates():
+    torch.manual_seed(0)
+    agent = DDPG(5, 2, config=DDPGConfig(hidden_sizes=(16, 16), batch_size=8, policy_delay=2))
+    rng = np.random.default_rng(0)
+
+    def snapshot():
+        return {name: [p.detach().clone() for p in getattr(agent, name).parameters()]
+                for name in ("actor", "critic", "actor_target", "critic_target")}
+
+    def changed(old, name):
+        return any(not torch.equal(p, q) for p, q in zip(old[name],
+                                                         getattr(agent, name).parameters()))
+
+    resumed = None
+    for update in (1, 2, 3, 4):
+        before, calls = snapshot(), []
+        stats = agent.update(random_batch(rng), grad_reducer=calls.append)
+        actor_turn = update % 2 == 0
+        assert changed(before, "critic")
+        assert changed(before, "actor") == changed(before, "actor_target") == \
+            changed(before, "critic_target") == actor_turn
+        assert calls == ([agent.critic, agent.actor] if actor_turn else [agent.critic])
+        assert ("policy_loss" in stats) == actor_turn
+        if update == 1:  # the update count is part of the saved state
+            resumed = DDPG(5, 2, config=agent.config)
+            resumed.load_state_dict(agent.state_dict())
+    assert resumed.updates == 1 and agent.updates == 4
+    assert "policy_loss" in resumed.update(random_batch(rng))
+
+
+def test_target_noise_is_clipped():
+    from dlo_course.ddpg import smoothed_target_action
+    action = torch.tensor([[0.0, 1.5], [1.9, -0.5]])
+    scale, bias = torch.tensor([2.0, 1.0]), torch.tensor([0.0, 1.0])  # bounds [-2, 2], [0, 2]
+    noise = torch.tensor([[100.0, -0.1], [0.25, -100.0]])
+    # eps clipped to +-0.3, times the scale, then the action clipped to the bounds
+    torch.testing.assert_close(smoothed_target_action(action, noise, 0.3, scale, bias),
+                               torch.tensor([[0.6, 1.4], [2.0, 0.0]]))
+
+    # In the agent: noise drawn from torch's generator, then the same smoothing.
+    cfg = DDPGConfig(hidden_sizes=(16, 16), target_noise=5.0, target_noise_clip=0.1)
+    agent = DDPG(5, 2, action_low=[-2, -1], action_high=[2, 1], config=cfg)
+    next_obs = torch.randn(32, 5)
+    torch.manual_seed(7)
+    value = agent.target_value(next_obs)
+    torch.manual_seed(7)
+    mu = agent.actor_target(next_obs)
+    smoothed = smoothed_target_action(mu, 5.0 * torch.randn_like(mu), 0.1,
+                                      agent.actor.action_scale, agent.actor.action_bias)
+    assert torch.all((smoothed - mu).abs() <= 0.1 * agent.actor.action_scale + 1e-6)
+    assert torch.equal(value, agent.critic_target(next_obs, smoothed))
+    assert not torch.equal(value, agent.critic_target(next_obs, mu))
+
+
+def test_all_td3_options_together_with_bigger_batches():
+    torch.manual_seed(0)
+    agent = DDPG(5, 2, config=TD3)
+    rng = np.random.default_rng(0)
+    stats = [agent.update(random_batch(rng, b=64)) for _ in range(4)]
+    assert [("policy_loss" in s) for s in stats] == [False, True, False, True]
+    assert all(np.isfinite(v) for s in stats for v in s.values())

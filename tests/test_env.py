@@ -84,7 +84,9 @@ def test_termination_at_the_threshold(make_env):
 
 
 def test_reset_with_and_without_reinitialization(make_env, far_goals):
-    env = make_env(n_nodes=4, goals=far_goals)
+    # No settling at reset, so the shape carried over is exactly the last one.
+    env = make_env(n_nodes=4, goals=far_goals,
+                   params=SimParams(reset_settle_steps=0, rebuild_settle_steps=0))
     env.reset(seed=3)
     initial = env.scene.node_positions()
     for _ in range(3):
@@ -101,6 +103,30 @@ def test_reset_with_and_without_reinitialization(make_env, far_goals):
 
     env.reset(options={"reinitialize": True})
     np.testing.assert_array_equal(env.scene.node_positions(), initial)
+
+
+@pytest.mark.parametrize("n_nodes", [2, 6])
+def test_reset_settles_the_world_as_the_authors_did(make_env, n_nodes):
+    env = make_env(n_nodes=n_nodes, goals=np.full((1, n_nodes, 3), 0.5))
+    steps = []
+    original = env.scene.step_physics
+    env.scene.step_physics = lambda n=1: (steps.append(n), original(n))
+    assert env.params.reset_steps(n_nodes, rebuilt=False) == 12 + n_nodes  # 1 + m + 1 + 10
+    assert env.params.reset_steps(n_nodes, rebuilt=True) == 20 + n_nodes
+    env.reset(seed=0)  # the first reset counts as a rebuild
+    initial = env.scene.node_positions()
+    env.step([1.0, 1.0, -1.0])
+    moved = env.scene.node_positions()
+    env.reset(options={"reinitialize": False})
+    settled = env.scene.node_positions()
+    env.reset(options={"reinitialize": True})
+    assert steps == [20 + n_nodes, 12 + n_nodes, 20 + n_nodes]
+    # Without a rebuild the rod keeps its shape but relaxes from the last action's jerk.
+    assert 0 < np.max(np.abs(settled - moved)) < 0.1
+    np.testing.assert_array_equal(env.scene.node_positions(), initial)
+    assert SimParams(reset_settle_steps=5).reset_steps(n_nodes, rebuilt=True) == 13
+    with pytest.raises(ValueError, match="reset_settle_steps"):
+        SimParams(reset_settle_steps=-1)
 
 
 def test_same_seed_same_trajectory(make_env, far_goals):

@@ -11,6 +11,7 @@ import torch
 
 from dlo_course.ddpg import Actor, Critic, save_network
 from dlo_course.env import DLOShapeEnv
+from dlo_course.simulation import SimParams
 from dlo_course.evaluation import (
     CheckpointError, EpisodeRecord, evaluate, goal_schedule, load_actor, run_episodes,
     summarize, wilson_interval,
@@ -114,7 +115,9 @@ def test_parallel_split_equals_one_process_with_reinitialization(checkpoint, goa
 def test_without_reinitialization_episodes_continue_from_the_last_shape(checkpoint, goals_2):
     actor, _ = load_actor(checkpoint)
     schedule = np.array([2, 2])
-    env = DLOShapeEnv(n_nodes=2, goals=goals_2, threshold=0.001)
+    # No settling at reset, so a chained episode starts exactly where the last one ended.
+    env = DLOShapeEnv(n_nodes=2, goals=goals_2, threshold=0.001,
+                      params=SimParams(reset_settle_steps=0, rebuild_settle_steps=0))
     try:
         chained = run_episodes(actor, env, [0, 1], schedule, False, max_steps=3)
         fresh = run_episodes(actor, env, [0, 1], schedule, True, max_steps=3)

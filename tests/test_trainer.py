@@ -15,7 +15,7 @@ from dlo_course.trainer import (PRESETS, PROGRESS_COLUMNS, TrainConfig, load_con
                                 preset, run_episode, train)
 
 
-# --- two tiny test environments ---
+# --- tiny test environments ---
 
 class ReachAtStep3(gymnasium.Env):
     """1-D toy: terminates with success at its 3rd step and reports a distance, like the rod."""
@@ -35,22 +35,64 @@ class ReachAtStep3(gymnasium.Env):
         return np.full(2, self.t / 10, np.float32), -0.1 / self.t, done, False, info
 
 
-class CrashingPendulum(gymnasium.Wrapper):
-    """Pendulum that raises at the ``crash_at``-th step made by any instance (a killed run)."""
+class ReachShape(gymnasium.Env):
+    """A pure-NumPy stand-in for DLOShape-v0, for hindsight relabelling: its layout
+    [tip 3 | tip velocity 3 | P_c 3m | P_d 3m], its reward -mean ||P_c - P_d||, terminated
+    below ``threshold``. Two "nodes" hang rigidly below the tip, which an action moves by up
+    to 6 cm; the goal is that shape shifted by up to 30 cm."""
+
+    n_nodes, threshold = 2, 0.01
+    observation_space = gymnasium.spaces.Box(-10.0, 10.0, (6 + 6 * 2,), np.float32)
+    action_space = gymnasium.spaces.Box(-1.0, 1.0, (3,), np.float32)
+    below_tip = np.array([[0.0, 0.0, -0.3], [0.0, 0.0, -0.6]])
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.tip, self.velocity = np.zeros(3), np.zeros(3)
+        self.goal = self.below_tip + self.np_random.uniform(-0.3, 0.3, 3)
+        return self._observe()
+
+    def step(self, action):
+        self.velocity = 0.06 * np.clip(action, -1.0, 1.0)
+        self.tip = self.tip + self.velocity
+        obs, info = self._observe()
+        return obs, -info["distance"], info["is_success"], False, info
+
+    def _observe(self):
+        nodes = self.tip + self.below_tip
+        distance = float(np.mean(np.linalg.norm(nodes - self.goal, axis=1)))
+        obs = np.concatenate([self.tip, self.velocity, nodes.ravel(), self.goal.ravel()])
+        return obs.astype(np.float32), {"distance": distance,
+                                        "is_success": distance < self.threshold}
+
+
+class Crashing(gymnasium.Wrapper):
+    """Raises at the ``crash_at``-th step made by any instance (a killed run)."""
 
     crash_at: int | None = None
     steps = 0
 
     def step(self, action):
-        CrashingPendulum.steps += 1
-        if CrashingPendulum.crash_at is not None and CrashingPendulum.steps >= self.crash_at:
+        Crashing.steps += 1
+        if Crashing.crash_at is not None and Crashing.steps >= self.crash_at:
             raise RuntimeError("simulated crash")
         return super().step(action)
 
 
 gymnasium.register("test/ReachAtStep3-v0", entry_point=ReachAtStep3)
+gymnasium.register("test/ReachShape-v0", entry_point=ReachShape)
 gymnasium.register("test/CrashingPendulum-v0",
-                   entry_point=lambda **kw: CrashingPendulum(gymnasium.make("Pendulum-v1", **kw)))
+                   entry_point=lambda **kw: Crashing(gymnasium.make("Pendulum-v1", **kw)))
+gymnasium.register("test/CrashingReachShape-v0",
+                   entry_point=lambda **kw: Crashing(gymnasium.make("test/ReachShape-v0", **kw)))
+
+# Every lever of issue 12 at once, on small networks: for the goal environment above.
+# (With these sizes the checkpoint of episode 2 falls after 62 updates, not a multiple of
+# policy_delay: a resume that lost the update count would update the actor off beat.)
+LEVERS = dict(her_k=2, updates_per_step=2,
+              ddpg=DDPGConfig(hidden_sizes=(32, 32), batch_size=20, buffer_size=800,
+                              twin_critics=True, policy_delay=3, target_noise=0.2,
+                              target_noise_clip=0.3))
 
 
 def tiny(tmp_path, name="run", **overrides) -> TrainConfig:
@@ -121,24 +163,39 @@ def test_stopped_and_resumed_run_equals_uninterrupted_run(tmp_path):
     assert same_weights(part, whole)
 
 
-def test_killed_run_resumes_from_its_last_checkpoint(tmp_path):
-    def config(name):
-        return tiny(tmp_path, name, env_id="test/CrashingPendulum-v0", episodes=5)
+@pytest.mark.parametrize("levers", [False, True], ids=["paper", "her_td3"])
+def test_killed_run_resumes_from_its_last_checkpoint(tmp_path, levers):
+    # With the levers: hindsight copies (their generator is checkpointed), twin critics (the
+    # second one and its optimiser are), a policy delay (the update count is) and target
+    # noise (torch's generator is).
+    env_id = "test/CrashingReachShape-v0" if levers else "test/CrashingPendulum-v0"
 
-    CrashingPendulum.crash_at = None
+    def config(name):
+        return tiny(tmp_path, name, env_id=env_id, episodes=5, **(LEVERS if levers else {}))
+
+    Crashing.crash_at = None
     whole = train(config("whole"), progress=False)
 
-    CrashingPendulum.steps, CrashingPendulum.crash_at = 0, 3 * 25 + 10  # during episode 4
+    Crashing.steps, Crashing.crash_at = 0, 3 * 25 + 10  # during episode 4
     with pytest.raises(RuntimeError, match="simulated crash"):
         train(config("killed"), progress=False)
     killed = tmp_path / "killed"
     assert len(read_rows(killed)) == 3  # episode 3 was logged after the checkpoint of episode 2
     assert json.loads((killed / "checkpoints" / "latest.json").read_text())["episodes_done"] == 2
 
-    CrashingPendulum.crash_at = None
+    Crashing.crash_at = None
     train(config("killed"), resume=True, progress=False)
     assert read_rows(killed) == read_rows(whole)
     assert same_weights(killed, whole)
+    if levers:
+        assert int(read_rows(whole)[-1]["updates"]) > 0
+        shared = torch.load(killed / "checkpoints" / "episode000005" / "shared.pt",
+                            weights_only=False)
+        whole_shared = torch.load(whole / "checkpoints" / "episode000005" / "shared.pt",
+                                  weights_only=False)
+        for name in ("critic2", "critic2_target"):
+            assert all(torch.equal(shared["agent"][name][k], whole_shared["agent"][name][k])
+                       for k in shared["agent"][name])
 
 
 def test_bad_input_gives_clear_errors(tmp_path):
@@ -201,3 +258,173 @@ def test_updates_per_step_and_observation_scaling_from_a_bounded_space(tmp_path)
     torch.testing.assert_close(actor.scaling.offset, torch.zeros(3))
     with pytest.raises(ValueError, match="updates_per_step"):
         tiny(tmp_path, updates_per_step=0)
+
+
+# --- the training levers of issue 12 (all off by default and in the paper preset) ---
+
+LEVER_DEFAULTS = {"her_k": 0, "reset_between_episodes": True, "updates_per_step": 1}
+TD3_DEFAULTS = {"twin_critics": False, "policy_delay": 1, "target_noise": 0.0}
+
+
+def levers_of(config):
+    return ({k: getattr(config, k) for k in LEVER_DEFAULTS},
+            {k: getattr(config.ddpg, k) for k in TD3_DEFAULTS})
+
+
+def test_levers_are_off_by_default_and_in_the_paper_preset():
+    assert levers_of(TrainConfig()) == levers_of(PRESETS["paper"]) == (LEVER_DEFAULTS,
+                                                                       TD3_DEFAULTS)
+    assert PRESETS["paper"].ddpg == DDPGConfig()
+    for name in ("smoke", "laptop", "course"):  # the older presets do not use the new levers
+        lever, td3 = levers_of(PRESETS[name])
+        assert td3 == TD3_DEFAULTS and lever["her_k"] == 0 and lever["reset_between_episodes"]
+    with pytest.raises(ValueError, match="her_k"):
+        TrainConfig(her_k=-1)
+
+
+def test_recipe_preset():
+    recipe = preset("recipe")
+    assert recipe.env_id == "DLOShape-v0" and recipe.env_kwargs == {"n_nodes": 4}
+    assert (recipe.episodes, recipe.steps_per_episode, recipe.checkpoint_every,
+            recipe.expected_agents, recipe.updates_per_step, recipe.her_k,
+            recipe.reset_between_episodes, recipe.reduce) == (500, 60, 10, 2, 2, 4, False, "sum")
+    d = recipe.ddpg
+    assert (d.normalize_obs, d.preactivation_l2, d.noise_sigma, d.batch_size, d.buffer_size,
+            d.twin_critics, d.policy_delay, d.target_noise, d.target_noise_clip) == \
+        (True, 0.01, 0.15, 256, 200_000, True, 2, 0.1, 0.3)
+    # Everything else is the paper's DDPG.
+    import dataclasses
+    assert dataclasses.replace(d, **{k: getattr(DDPGConfig(), k) for k in (
+        "normalize_obs", "preactivation_l2", "noise_sigma", "batch_size", "buffer_size",
+        "twin_critics", "policy_delay", "target_noise", "target_noise_clip")}) == DDPGConfig()
+
+
+def test_hindsight_copies_follow_each_episode(tmp_path):
+    config = tiny(tmp_path, env_id="test/ReachShape-v0", steps_per_episode=10, her_k=3,
+                  warmup=10**9)
+    env = make_env(config)
+    buffer = ReplayBuffer(18, 3, 500, seed=0)
+    with pytest.raises(ValueError, match="HindsightRelabeller"):
+        run_episode(env, DDPG(18, 3, config=config.ddpg), buffer, OUNoise(3, seed=0), config,
+                    0, None)
+    from dlo_course.her import HindsightRelabeller
+    her = HindsightRelabeller.for_env(env, k=3, seed=0)
+    agent = DDPG(18, 3, config=config.ddpg)
+    stats = run_episode(env, agent, buffer, OUNoise(3, seed=0), config, 0, None, her)
+    T = 10
+    assert stats["length"] == T and len(buffer) == T * (1 + 3)
+    real_obs, real_next = buffer.obs[:T], buffer.next_obs[:T]
+    for i in range(T, T * 4):  # the copies, after the episode's real transitions
+        (t,) = np.flatnonzero((real_obs[:, :12] == buffer.obs[i, :12]).all(axis=1))
+        np.testing.assert_array_equal(buffer.act[i], buffer.act[t])
+        np.testing.assert_array_equal(buffer.next_obs[i, :12], real_next[t, :12])
+        goal = buffer.obs[i, 12:]
+        np.testing.assert_array_equal(buffer.next_obs[i, 12:], goal)
+        reached_at = [u for u in range(T) if np.array_equal(real_next[u, 6:12], goal)]
+        assert reached_at and max(reached_at) >= t  # a shape reached at or after step t
+        distance = np.mean(np.linalg.norm((real_next[t, 6:12] - goal).reshape(2, 3), axis=1))
+        assert buffer.rew[i] == pytest.approx(-distance, abs=1e-6)
+        assert buffer.done[i] == float(distance < ReachShape.threshold)
+    assert buffer.done[T * 4 - 3:T * 4].all()  # the last step can only be relabelled with t' = t
+
+
+def test_levers_need_the_right_environment(tmp_path):
+    with pytest.raises(ValueError, match="needs a goal-reaching environment"):
+        train(tiny(tmp_path, "her", her_k=4), progress=False)
+    with pytest.raises(ValueError, match="needs DLOShape-v0"):
+        train(tiny(tmp_path, "keep", reset_between_episodes=False), progress=False)
+    assert not (tmp_path / "her").exists() and not (tmp_path / "keep").exists()
+
+
+def test_levers_are_recorded_and_set_from_the_command_line(tmp_path):
+    out = tmp_path / "cli"
+    result = CliRunner().invoke(main, [
+        "train", "--preset", "smoke", "--env", "test/ReachShape-v0", "--episodes", "2",
+        "--steps-per-episode", "12", "--her-k", "3", "--twin-critics", "--policy-delay", "3",
+        "--target-noise", "0.2", "--target-noise-clip", "0.4", "--batch-size", "20",
+        "--updates-per-step", "2", "--out", str(out), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    recorded = json.loads((out / "config.json").read_text())["config"]
+    assert (recorded["her_k"], recorded["updates_per_step"],
+            recorded["reset_between_episodes"]) == (3, 2, True)
+    assert {k: recorded["ddpg"][k] for k in ("twin_critics", "policy_delay", "target_noise",
+                                             "target_noise_clip", "batch_size")} == \
+        {"twin_critics": True, "policy_delay": 3, "target_noise": 0.2,
+         "target_noise_clip": 0.4, "batch_size": 20}
+    config = load_config(out)
+    assert config.her_k == 3 and config.ddpg.twin_critics and config.ddpg.policy_delay == 3
+    rows = read_rows(out)
+    assert int(rows[-1]["updates"]) > 0 and rows[-1]["policy_loss"] != ""
+    # The exported critic is the first one.
+    agent = torch.load(out / "checkpoints" / "episode000002" / "shared.pt",
+                       weights_only=False)["agent"]
+    critic = load_network(out / "critic.pt").state_dict()
+    assert all(torch.equal(critic[k], agent["critic"][k]) for k in critic)
+    assert not all(torch.equal(critic[k], agent["critic2"][k]) for k in critic)
+
+    # A run checkpointed before the levers existed resumes, its missing options read as off.
+    train(tiny(tmp_path, "old", episodes=1), progress=False)
+    shared_old = tmp_path / "old" / "checkpoints" / "episode000001" / "shared.pt"
+    blob = torch.load(shared_old, weights_only=False)
+    for key in ("her_k", "reset_between_episodes"):
+        del blob["config"][key]
+    for key in ("twin_critics", "policy_delay", "target_noise", "target_noise_clip"):
+        del blob["config"]["ddpg"][key]
+    del blob["agent"]["updates"]
+    torch.save(blob, shared_old)
+    train(tiny(tmp_path, "old", episodes=2), resume=True, progress=False)
+    assert len(read_rows(tmp_path / "old")) == 2
+
+    # The preset's value is the default; a lever on the wrong environment is a clear error.
+    result = CliRunner().invoke(main, ["train", "--env", "Pendulum-v1", "--keep-shape",
+                                       "--out", str(tmp_path / "keep"), "--no-progress"])
+    assert result.exit_code == 1 and "needs DLOShape-v0" in result.output
+
+
+def test_keep_shape_between_episodes_on_the_rod(tmp_path):
+    """reset_between_episodes=False: episode 2 starts from the shape episode 1 ended in;
+    True: from the initial shape. Runs the real simulator: 2 x 2 episodes of 3 actions."""
+    from types import SimpleNamespace
+
+    from dlo_course.env import DLOShapeEnv
+
+    goals = np.array([[[1.0, 0.3, 0.7], [1.0, 0.3, 1.2]]])  # far: no episode terminates
+    push = np.array([-1.0, 1.0, -1.0], np.float32)
+    agent = SimpleNamespace(act=lambda obs, noise: push)  # the same action at every step
+    noise = SimpleNamespace(reset=lambda: None)
+
+    def two_episodes(keep_shape):
+        config = TrainConfig(env_kwargs={"n_nodes": 2, "goals": goals}, steps_per_episode=3,
+                             warmup=10**9, reset_between_episodes=not keep_shape)
+        env = make_env(config)
+        starts = []
+        try:
+            buffer = ReplayBuffer(18, 3, 10, seed=0)
+            for episode in range(2):
+                run_episode(env, agent, buffer, noise, config, seed=episode, grad_reducer=None)
+                starts.append(buffer.obs[3 * episode].copy())
+            end_of_first = buffer.next_obs[2].copy()
+        finally:
+            env.close()
+        return starts, end_of_first
+
+    starts, end_of_first = two_episodes(keep_shape=True)
+    # What the environment's own reset that keeps the shape gives after the same 3 actions
+    # (it may let the rod settle a few physics steps before observing, as the authors' did).
+    reference = DLOShapeEnv(n_nodes=2, goals=goals)
+    try:
+        reference.reset(seed=0)
+        for _ in range(3):
+            reference.step(push)
+        kept, _ = reference.reset(seed=1, options={"reinitialize": False})
+    finally:
+        reference.close()
+    np.testing.assert_array_equal(starts[1], kept)
+    shape = slice(6, 12)  # P_c
+    moved = np.abs(end_of_first[shape] - starts[0][shape]).max()
+    assert moved > 0.05  # the 3 actions really deformed the rod...
+    assert np.abs(starts[1][shape] - starts[0][shape]).max() > moved / 2  # ...and it stays so
+
+    starts_rebuilt, _ = two_episodes(keep_shape=False)
+    np.testing.assert_array_equal(starts_rebuilt[1][shape], starts_rebuilt[0][shape])
+    np.testing.assert_array_equal(starts_rebuilt[0], starts[0])
