@@ -3,34 +3,60 @@
 import numpy as np
 import pytest
 
-from dlo_course.database import BOXES, Box, sweep_waypoints
+from dlo_course.database import BOXES, Box, authors_sweep
 
 pytestmark = pytest.mark.notebook("07_deformation_databases")
 
+# The paper's two boxes, tiny ones, and odd and even numbers of y lines.
+TEST_BOXES = [
+    BOXES["small"],
+    BOXES["large"],
+    Box("tiny", (-0.02, -0.02, -0.02), (0.02, 0.02, 0.0), (1, 1, 1)),
+    Box("one", (-0.01, -0.01, -0.01), (0.01, 0.01, 0.0), (0, 0, 0)),
+    Box("flat", (-0.1, -0.2, -0.1), (0.05, 0.3, 0.0), (3, 0, 2)),
+    Box("uneven", (-0.12, -0.3, -0.2), (0.04, 0.1, 0.0), (2, 5, 3)),
+    Box("even", (-0.1, -0.25, -0.25), (0.05, 0.25, 0.0), (5, 21, 5)),
+]
 
-@pytest.mark.exercise("snake_order", points=2)
-def test_snake_order(exercise):
-    # A box with nz = 0 has a single level: the library's sweep is the descent, then the snake.
-    for nx, ny in [(5, 20), (8, 22), (0, 0), (1, 2), (3, 0)]:
-        box = Box("t", (-0.1, -0.2, -0.1), (0.05, 0.3, 0.0), (nx, ny, 0))
-        xs = np.linspace(box.low[0], box.high[0], nx + 2)
-        ys = np.linspace(box.low[1], box.high[1], ny + 2)
-        got = np.asarray(exercise(xs.copy(), ys.copy()), dtype=np.float64)
-        expected = sweep_waypoints(box)[1:, :2]
-        assert got.shape == expected.shape, f"shape {got.shape}, expected {expected.shape}"
-        np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12)
-    # unevenly spaced coordinates are visited in the same pattern
-    got = np.asarray(exercise(np.array([0.0, 1.0, 5.0]), np.array([2.0, 3.0])))
-    np.testing.assert_array_equal(got, [[0, 2], [1, 2], [5, 2], [5, 3], [1, 3], [0, 3]])
+
+def levels_of(box: Box):
+    """The library's sweep cut into levels: (rx, ry, direction, moves) for each level."""
+    sweep = authors_sweep(box)
+    rx, ry, rz = (n + 1 for n in box.divisions)
+    start = int(np.count_nonzero(~sweep.recorded))
+    per_level = box.expected_count // rz
+    for level in range(rz):
+        moves = sweep.moves[start + level * per_level:start + (level + 1) * per_level]
+        yield rx, ry, (1 if level % 2 == 0 else -1), moves
+
+
+@pytest.mark.exercise("level_moves", points=2)
+def test_level_moves(exercise):
+    for box in TEST_BOXES:
+        for rx, ry, direction, expected in levels_of(box):
+            got = np.asarray(exercise(rx, ry, box.steps.copy(), direction), dtype=np.float64)
+            assert got.shape == expected.shape, \
+                f"{box.name} box, direction {direction}: shape {got.shape}, expected {expected.shape}"
+            np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12,
+                                       err_msg=f"{box.name} box, direction {direction}")
+    # Steps given as a tuple, made-up numbers: the pattern does not depend on the box.
+    got = np.asarray(exercise(2, 3, (1.0, 2.0, 3.0), -1), dtype=np.float64)
+    x, y, z = [1.0, 0, 0], [0, -2.0, 0], [0, 0, -3.0]
+    back = [-1.0, 0, 0]
+    np.testing.assert_allclose(got, [x, x, y, back, back, y] * 2 + [z], rtol=0, atol=1e-12)
 
 
 @pytest.mark.exercise("sweep_count", points=1)
 def test_sweep_count(exercise):
     assert int(exercise((5, 20, 5))) == 930
     assert int(exercise((8, 22, 10))) == 2651
-    for divisions in [(0, 0, 0), (1, 2, 3), (5, 21, 5), (4, 4, 0)]:
+    for box in TEST_BOXES:
+        expected = box.expected_count
+        assert expected == int(authors_sweep(box).recorded.sum())
+        assert int(exercise(tuple(box.divisions))) == expected, f"divisions {box.divisions}"
+    for divisions in [(4, 4, 0), (0, 3, 1), (7, 2, 4)]:
         box = Box("t", (-0.1, -0.1, -0.1), (0.1, 0.1, 0.0), divisions)
-        assert int(exercise(divisions)) == box.expected_count == len(sweep_waypoints(box))
+        assert int(exercise(divisions)) == box.expected_count == authors_sweep(box).recorded.sum()
 
 
 @pytest.mark.exercise("inside_box", points=1)
@@ -38,7 +64,7 @@ def test_inside_box(exercise):
     rng = np.random.default_rng(7)
     small = BOXES["small"]
     points = np.concatenate([rng.uniform(-0.5, 0.5, size=(500, 3)),
-                             sweep_waypoints(BOXES["large"]),
+                             authors_sweep(BOXES["large"]).offsets,
                              [small.low, small.high]])  # corners: borders are inside
     low, high = np.asarray(small.low), np.asarray(small.high)
     got = np.asarray(exercise(points.copy(), low.copy(), high.copy()))
