@@ -428,7 +428,7 @@ def _record_settled(scene, box: Box, settle_steps: int, limit: int | None, recor
 
 def generate_database(box: str, out: Path | None = None, settle_steps: int | None = None,
                       time_mode: str = "code", limit: int | None = None,
-                      progress: bool = True) -> Path:
+                      progress: bool = True, params=None) -> Path:
     """Record the database of ``box`` in the simulator and save it (see the module doc).
 
     Args:
@@ -440,6 +440,8 @@ def generate_database(box: str, out: Path | None = None, settle_steps: int | Non
             authors' sweep is defined in physics steps).
         limit: stop after this many deformations (a partial file, for a quick look).
         progress: show a progress bar.
+        params: the scene's :class:`~dlo_course.simulation.SimParams` (default: the
+            paper's), e.g. to record a database of a rod of another material.
 
     Every file stores ``protocol`` and its parameters, the nominal tip ``offsets``, the
     ``initial_tip``, and ``node_speed``: the mean node speed over the last physics step (authors'
@@ -458,16 +460,16 @@ def generate_database(box: str, out: Path | None = None, settle_steps: int | Non
     spec = BOXES[box]
     if settle_steps is None:
         protocol, offsets = AUTHORS_SWEEP, authors_sweep(spec).offsets
-        params: dict = dict(steps_before=SWEEP_STEPS_BEFORE,
-                            steps_per_start_move=SWEEP_STEPS_PER_START_MOVE,
-                            steps_per_move=SWEEP_STEPS_PER_MOVE, ik=np.array("plain"))
+        protocol_meta: dict = dict(steps_before=SWEEP_STEPS_BEFORE,
+                                   steps_per_start_move=SWEEP_STEPS_PER_START_MOVE,
+                                   steps_per_move=SWEEP_STEPS_PER_MOVE, ik=np.array("plain"))
     else:
         protocol, offsets = SETTLED, settled_waypoints(spec)
-        params = dict(settle_steps=settle_steps, time_mode=np.array(time_mode))
+        protocol_meta = dict(settle_steps=settle_steps, time_mode=np.array(time_mode))
     total = len(offsets) if limit is None else min(limit, len(offsets))
     path = Path(out) if out is not None else database_path(box)
     partial = path.with_suffix(".partial.npz")
-    scene = RodScene(SimParams(time_mode=time_mode))
+    scene = RodScene((params or SimParams()).with_(time_mode=time_mode))
     tips, nodes, speeds = [], [], []
     bar = tqdm(total=total, desc=f"{protocol}: {box} box", unit="deformation",
                disable=not progress)
@@ -479,7 +481,7 @@ def generate_database(box: str, out: Path | None = None, settle_steps: int | Non
             divisions=np.array(spec.divisions), offsets=offsets[:len(tips)],
             initial_tip=scene.initial_tip, node_speed=np.array(speeds),
             protocol=np.array(protocol), complete=np.array(len(tips) == len(offsets)),
-            **params)
+            **protocol_meta)
 
     def record(before: np.ndarray, seconds: float) -> None:
         after = scene.node_positions()
