@@ -382,10 +382,13 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
               help="Folder with nodes2/ nodes4/ nodes6/ run directories "
                    "(default: the shipped data/checkpoints).")
 @click.option("--episodes", type=click.IntRange(min=1), default=None,
-              help="Test episodes per setting (default 20, about 15 min on 2 cores; "
-                   "the paper: 1000).")
+              help="Test episodes per setting (default 100; the paper: 1000).")
 @click.option("--max-steps", type=click.IntRange(min=1), default=None,
               help="Actions per test episode (default 30, as in the paper).")
+@click.option("--whole-database", type=click.Choice(["with", "all", "none"]), default="with",
+              show_default=True,
+              help="Which cells also get the harder protocol, goals drawn from the whole "
+                   "database: those with reinitialisation, all, or none.")
 @click.option("--train", "retrain", is_flag=True,
               help="Train the three agents with --preset first, instead of using checkpoints.")
 @click.option("--preset", "preset_name", type=PresetChoice(),
@@ -395,7 +398,8 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
 @click.option("--time-mode", type=click.Choice(["code", "paper"]), default="code",
               show_default=True)
 def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_steps: int | None,
-              retrain: bool, preset_name: str | None, seed: int, time_mode: str) -> None:
+              whole_database: str, retrain: bool, preset_name: str | None, seed: int,
+              time_mode: str) -> None:
     """Regenerate the paper's Table I and Figs. 4-5 beside the published numbers."""
     from dlo_course.evaluation import CheckpointError
     from dlo_course.reproduce import reproduce as run
@@ -409,12 +413,12 @@ def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_ste
                                + "|".join(PresetChoice().choices))
     if retrain and checkpoints is not None:
         raise click.UsageError("--train writes new checkpoints; drop --checkpoints")
-    episodes = episodes or (2 if smoke else 20)
+    episodes = episodes or (2 if smoke else 100)
     max_steps = max_steps or (10 if smoke else 30)
     try:
         report = run(out, checkpoints=checkpoints, episodes=episodes, max_steps=max_steps,
                      seed=seed, train_preset=preset_name if (retrain or smoke) else None,
-                     time_mode=time_mode)
+                     time_mode=time_mode, whole_database=whole_database)
     except (CheckpointError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from None
     if report is not None:

@@ -205,43 +205,96 @@ def play_episode(actor, env, obs: np.ndarray, max_steps: int) -> tuple[bool, int
         (done, steps, info): whether the threshold was reached, the actions taken, and the
         ``info`` of the last step.
     """
+    done, distances, info = _play(actor, env, obs, max_steps)
+    return done, len(distances), info
+
+
+def _play(actor, env, obs: np.ndarray, max_steps: int) -> tuple[bool, list[float], dict]:
+    """:func:`play_episode`, also returning the mean node distance after every action."""
     import torch
 
-    for steps in range(1, max_steps + 1):
+    distances: list[float] = []
+    info: dict = {}
+    for _ in range(max_steps):
         with torch.no_grad():
             action = actor(torch.as_tensor(obs[None]))[0].numpy()
         obs, _, terminated, truncated, info = env.step(action)
+        distances.append(float(info["distance"]))
         if terminated or truncated:
-            return bool(terminated), steps, info
-    return False, max_steps, info
+            return bool(terminated), distances, info
+    return False, distances, info
 
 
-def run_episodes(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
-                 reinitialize: bool, max_steps: int, progress=None) -> list[EpisodeRecord]:
+@dataclass(frozen=True)
+class EpisodeTrace:
+    """What one test episode did, enough to score it at any threshold above the one it ran with.
+
+    The environment stops an episode at its own threshold; at a larger threshold the same
+    episode would have stopped at the first action that brought the distance below it, and
+    everything up to that action is identical. So one episode run at 0.03 m gives both the
+    0.03 m and the 0.05 m results of Table I (with reinitialisation, where episodes do not
+    depend on each other).
+    """
+
+    start_distance: float
+    distances: tuple[float, ...]
+    """Mean node distance (m) after each action."""
+
+    def record(self, episode: int, goal_index: int, threshold: float) -> EpisodeRecord:
+        """The episode's outcome at ``threshold`` (not below the one it was run with)."""
+        for steps, distance in enumerate(self.distances, start=1):
+            if distance < threshold:
+                return EpisodeRecord(episode, goal_index, True, distance, steps,
+                                     self.start_distance)
+        final = self.distances[-1] if self.distances else self.start_distance
+        return EpisodeRecord(episode, goal_index, False, final, len(self.distances),
+                             self.start_distance)
+
+
+def run_traces(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
+               reinitialize: bool, max_steps: int, progress=None) -> list[EpisodeTrace]:
     """Run the given test episodes in order on one environment (one chain of episodes).
+
+    With reinitialisation every episode starts from the same rebuilt world, and the policy
+    and the simulation are deterministic, so two episodes with the same goal shape are the
+    same episode: it is simulated once (the paper's test files repeat their goals).
 
     Args:
         actor: deterministic policy, a module mapping (1, obs_dim) tensors to (1, 3) actions.
-        env: a :class:`~dlo_course.env.DLOShapeEnv` built with the test goals and threshold.
+        env: a :class:`~dlo_course.env.DLOShapeEnv` built with the test goals; it stops each
+            episode at its own ``threshold``.
         episode_ids: global indices of the episodes this process runs.
         goal_indices: goal index of every episode (global, see :func:`goal_schedule`).
         reinitialize: rebuild the world before each episode, or continue from the last shape.
         max_steps: at most this many actions per episode.
         progress: an optional callable called once after each episode.
     """
-    records = []
+    traces, seen = [], {}
     for i, episode in enumerate(episode_ids):
-        # The first episode of a chain starts from the initial configuration.
-        options = {"reinitialize": reinitialize or i == 0,
-                   "goal_index": int(goal_indices[episode])}
-        obs, info = env.reset(options=options)
-        start = info["distance"]
-        done, steps, info = play_episode(actor, env, obs, max_steps)
-        records.append(EpisodeRecord(int(episode), int(goal_indices[episode]), done,
-                                     float(info["distance"]), steps, float(start)))
+        goal_index = int(goal_indices[episode])
+        key = env.unwrapped.goal_set[goal_index].tobytes()
+        if reinitialize and key in seen:
+            traces.append(seen[key])
+        else:
+            # The first episode of a chain starts from the initial configuration.
+            obs, info = env.reset(options={"reinitialize": reinitialize or i == 0,
+                                           "goal_index": goal_index})
+            _, distances, _ = _play(actor, env, obs, max_steps)
+            traces.append(EpisodeTrace(float(info["distance"]), tuple(distances)))
+            if reinitialize:
+                seen[key] = traces[-1]
         if progress is not None:
             progress()
-    return records
+    return traces
+
+
+def run_episodes(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
+                 reinitialize: bool, max_steps: int, progress=None) -> list[EpisodeRecord]:
+    """:func:`run_traces`, scored at the environment's threshold."""
+    traces = run_traces(actor, env, episode_ids, goal_indices, reinitialize, max_steps, progress)
+    threshold = env.unwrapped.threshold
+    return [trace.record(int(episode), int(goal_indices[episode]), threshold)
+            for episode, trace in zip(episode_ids, traces)]
 
 
 def evaluate(checkpoint: str | Path, goals: str | Path | np.ndarray = "small",
@@ -255,6 +308,24 @@ def evaluate(checkpoint: str | Path, goals: str | Path | np.ndarray = "small",
     Returns:
         (summary, records) on rank 0, sorted by episode; (None, []) on the other ranks.
     """
+    return evaluate_thresholds(checkpoint, goals, (threshold,), reinitialize, episodes,
+                               max_steps, seed, n_nodes, time_mode, show_progress)[threshold]
+
+
+def evaluate_thresholds(checkpoint: str | Path, goals: str | Path | np.ndarray,
+                        thresholds: Sequence[float], reinitialize: bool = True,
+                        episodes: int = 1000, max_steps: int = 30, seed: int = 0,
+                        n_nodes: int | None = None, time_mode: str = "code",
+                        show_progress: bool = True) -> dict[float, tuple[Summary | None, list]]:
+    """:func:`evaluate` at several thresholds, with the same goals.
+
+    With reinitialisation the episodes are run once, at the smallest threshold, and scored at
+    every threshold (:class:`EpisodeTrace`); without, each threshold has its own chain of
+    episodes, since where one episode stops is where the next starts.
+
+    Returns:
+        {threshold: (summary, records)} as :func:`evaluate` gives them.
+    """
     from tqdm.auto import tqdm
 
     from dlo_course import mpi
@@ -265,24 +336,38 @@ def evaluate(checkpoint: str | Path, goals: str | Path | np.ndarray = "small",
         raise ValueError(f"episodes must be at least 1, got {episodes}")
     if max_steps < 1:
         raise ValueError(f"max_steps must be at least 1, got {max_steps}")
+    if not thresholds:
+        raise ValueError("give at least one threshold")
     actor, n_nodes = load_actor(checkpoint, n_nodes)
     goal_set = resolve_goals(goals, n_nodes)
     schedule = goal_schedule(len(goal_set), episodes, seed)
     rank, size = mpi.rank(), mpi.size()
     mine = list(range(rank, episodes, size))
+    runs = [min(thresholds)] if reinitialize else list(thresholds)
 
-    env = DLOShapeEnv(n_nodes=n_nodes, goals=goal_set, threshold=threshold,
-                      time_mode=time_mode)
-    bar = tqdm(total=len(mine), desc=f"evaluating (rank 0 of {size})", unit="episode",
-               disable=not (show_progress and rank == 0))
+    results: dict[float, tuple[Summary | None, list]] = {}
+    bar = tqdm(total=len(mine) * len(runs), desc=f"evaluating (rank 0 of {size})",
+               unit="episode", disable=not (show_progress and rank == 0))
     try:
-        records = run_episodes(actor, env, mine, schedule, reinitialize, max_steps,
-                               progress=lambda: bar.update(1))
+        for run_threshold in runs:
+            env = DLOShapeEnv(n_nodes=n_nodes, goals=goal_set, threshold=run_threshold,
+                              time_mode=time_mode)
+            try:
+                traces = run_traces(actor, env, mine, schedule, reinitialize, max_steps,
+                                    progress=lambda: bar.update(1))
+            finally:
+                env.close()
+            scored = thresholds if reinitialize else [run_threshold]
+            for threshold in scored:
+                records = [trace.record(episode, int(schedule[episode]), threshold)
+                           for episode, trace in zip(mine, traces)]
+                gathered = mpi.gather(records)
+                if rank != 0:
+                    results[threshold] = (None, [])
+                    continue
+                everything = sorted((r for part in gathered for r in part),
+                                    key=lambda r: r.episode)
+                results[threshold] = (summarize(everything), everything)
     finally:
         bar.close()
-        env.close()
-    gathered = mpi.gather(records)
-    if rank != 0:
-        return None, []
-    everything = sorted((r for part in gathered for r in part), key=lambda r: r.episode)
-    return summarize(everything), everything
+    return results

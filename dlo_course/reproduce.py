@@ -82,38 +82,81 @@ def train_agents(preset_name: str, out: Path, seed: int = 0) -> Path:
     return root
 
 
+GOAL_PROTOCOLS = {
+    "test": "the paper's test goals (`small-test`, `large-test`): the goals Table I was "
+            "measured on, mostly the sweep's first, uncompressed level",
+    "whole": "goals drawn uniformly from the whole database (`small`, `large`): a harder "
+             "protocol the paper did not run",
+}
+
+
+def goal_source(database: str, protocol: str) -> str:
+    """The goal source of a Table I cell: ``"small-test"`` for the paper's protocol."""
+    if protocol not in GOAL_PROTOCOLS:
+        raise ValueError(f"goal protocol must be one of {sorted(GOAL_PROTOCOLS)}, got {protocol!r}")
+    return f"{database}-test" if protocol == "test" else database
+
+
 def evaluate_cells(checkpoints: Path, episodes: int, max_steps: int, seed: int,
-                   time_mode: str = "code", cells: list[Cell] | None = None) -> list[dict]:
-    """Evaluate every cell; on rank 0 returns one dict per cell, elsewhere an empty list."""
+                   time_mode: str = "code", cells: list[Cell] | None = None,
+                   protocol: str = "test") -> list[dict]:
+    """Evaluate every cell; on rank 0 returns one dict per cell, elsewhere an empty list.
+
+    Cells that differ only by threshold share their episodes when the world is reinitialised
+    (:func:`dlo_course.evaluation.evaluate_thresholds`): 12 runs make the 24 cells.
+    """
     from tqdm.auto import tqdm
 
     from dlo_course import mpi
-    from dlo_course.evaluation import evaluate
+    from dlo_course.evaluation import evaluate_thresholds
 
     cells = cells or table1_cells()
-    rows = []
-    for cell in tqdm(cells, desc="Table I settings", unit="setting", disable=not mpi.is_root()):
-        summary, _ = evaluate(checkpoint_dir(checkpoints, cell.nodes), goals=cell.database,
-                              threshold=cell.threshold, reinitialize=cell.reinit == "with",
-                              episodes=episodes, max_steps=max_steps, seed=seed,
-                              n_nodes=cell.nodes, time_mode=time_mode, show_progress=False)
-        if summary is not None:
-            rows.append({"cell": cell, **summary.as_dict()})
-    return rows
+    groups: dict[tuple, list[Cell]] = {}
+    for cell in cells:
+        key = (cell.reinit, cell.nodes, cell.database) + (
+            () if cell.reinit == "with" else (cell.threshold,))
+        groups.setdefault(key, []).append(cell)
+    results: dict[Cell, dict] = {}
+    for group in tqdm(groups.values(), desc=f"Table I ({protocol} goals)", unit="run",
+                      disable=not mpi.is_root()):
+        first = group[0]
+        by_threshold = evaluate_thresholds(
+            checkpoint_dir(checkpoints, first.nodes), goal_source(first.database, protocol),
+            [cell.threshold for cell in group], reinitialize=first.reinit == "with",
+            episodes=episodes, max_steps=max_steps, seed=seed, n_nodes=first.nodes,
+            time_mode=time_mode, show_progress=False)
+        for cell in group:
+            summary, _ = by_threshold[cell.threshold]
+            if summary is not None:
+                results[cell] = {"cell": cell, **summary.as_dict()}
+    return [results[cell] for cell in cells if cell in results]
 
 
-def write_table(rows: list[dict], paper: dict, out: Path) -> tuple[Path, Path]:
-    """``table1.csv`` and ``table1.md``: ours, the paper's and the difference per setting."""
+def verdict(row: dict, paper_done: float) -> str:
+    """Where the paper's done % lies against our 95% interval: "above" (ours is significantly
+    above the paper's), "within", or "below"."""
+    if paper_done < row["done_ci_low"]:
+        return "above"
+    if paper_done > row["done_ci_high"]:
+        return "below"
+    return "within"
+
+
+def write_table(rows: list[dict], paper: dict, out: Path, name: str = "table1"
+                ) -> tuple[Path, Path]:
+    """``NAME.csv`` and ``NAME.md``: ours, the paper's and the difference per setting, with
+    a verdict (:func:`verdict`)."""
     out.mkdir(parents=True, exist_ok=True)
     fields = ["reinit", "nodes", "database", "threshold", "episodes",
               "done_percent", "done_ci_low", "done_ci_high", "paper_done_percent", "done_diff",
-              "mean_distance", "std_distance", "paper_mean_distance", "paper_std_distance",
-              "mean_diff", "best_distance", "paper_best_distance", "best_diff"]
-    csv_path, md_path = out / "table1.csv", out / "table1.md"
+              "verdict", "mean_distance", "std_distance", "paper_mean_distance",
+              "paper_std_distance", "mean_diff", "best_distance", "paper_best_distance",
+              "best_diff"]
+    csv_path, md_path = out / f"{name}.csv", out / f"{name}.md"
     lines = [
         "| reinit | nodes | db | thr | episodes | done % (95% CI) | paper done % | Δ done | "
-        "mean ± σ (m) | paper mean ± σ (m) | best (m) | paper best (m) |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "ours vs paper | mean ± σ (m) | paper mean ± σ (m) | best (m) | paper best (m) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     with open(csv_path, "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=fields)
@@ -128,6 +171,7 @@ def write_table(rows: list[dict], paper: dict, out: Path) -> tuple[Path, Path]:
                 "done_ci_high": row["done_ci_high"],
                 "paper_done_percent": ref["done_percent"],
                 "done_diff": row["done_percent"] - ref["done_percent"],
+                "verdict": verdict(row, ref["done_percent"]),
                 "mean_distance": row["mean_distance"], "std_distance": row["std_distance"],
                 "paper_mean_distance": ref["mean_distance"],
                 "paper_std_distance": ref["std_distance"],
@@ -142,7 +186,8 @@ def write_table(rows: list[dict], paper: dict, out: Path) -> tuple[Path, Path]:
                 f"| {cell.reinit} | {cell.nodes} | {cell.database} | {cell.threshold} | "
                 f"{row['episodes']} | {row['done_percent']:.1f} ({row['done_ci_low']:.1f}–"
                 f"{row['done_ci_high']:.1f}) | {ref['done_percent']:.1f} | "
-                f"{record['done_diff']:+.1f} | {row['mean_distance']:.5f} ± "
+                f"{record['done_diff']:+.1f} | {record['verdict']} | "
+                f"{row['mean_distance']:.5f} ± "
                 f"{row['std_distance']:.5f} | {ref['mean_distance']:.5f} ± "
                 f"{ref['std_distance']:.5f} | {row['best_distance']:.5f} | "
                 f"{ref['best_distance']:.5f} |")
@@ -175,7 +220,11 @@ def _run_record(folder: Path) -> dict:
                       updates_per_step=cfg.updates_per_step,
                       normalize_obs=cfg.ddpg.normalize_obs,
                       preactivation_l2=cfg.ddpg.preactivation_l2,
-                      noise_sigma=cfg.ddpg.noise_sigma)
+                      noise_sigma=cfg.ddpg.noise_sigma, her_k=cfg.her_k,
+                      reset_between_episodes=cfg.reset_between_episodes,
+                      batch_size=cfg.ddpg.batch_size, buffer_size=cfg.ddpg.buffer_size,
+                      twin_critics=cfg.ddpg.twin_critics, policy_delay=cfg.ddpg.policy_delay,
+                      target_noise=cfg.ddpg.target_noise)
     try:
         progress = read_progress(folder)
     except (FileNotFoundError, ValueError):  # no run yet, or not one episode
@@ -286,26 +335,70 @@ def course_options(record: dict) -> str:
         parts.append(f"{record['updates_per_step']} updates/step")
     if record.get("noise_sigma") not in (None, paper.noise_sigma):
         parts.append(f"OU sigma {record['noise_sigma']:g}")
+    if record.get("her_k"):
+        parts.append(f"HER k={record['her_k']}")
+    if record.get("reset_between_episodes") is False:
+        parts.append("no reset between episodes")
+    if record.get("batch_size") not in (None, paper.batch_size):
+        parts.append(f"batch {record['batch_size']}")
+    if record.get("buffer_size") not in (None, paper.buffer_size):
+        parts.append(f"buffer {record['buffer_size']}")
+    if record.get("twin_critics"):
+        parts.append("twin critics")
+    if record.get("policy_delay", paper.policy_delay) != paper.policy_delay:
+        parts.append(f"policy delay {record['policy_delay']}")
+    if record.get("target_noise"):
+        parts.append(f"target noise {record['target_noise']:g}")
     return ", ".join(parts) or "none"
 
 
-def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 20,
+WHOLE_DATABASE_CELLS = {"with": "with", "all": None, "none": ()}
+"""Which cells the whole-database table covers: those "with" reinitialisation, all, or none."""
+PAPER_CORE_HOURS = 32 * 3.5  # 32 cores for under 3.5 h
+PAPER_TRANSITIONS = 32 * 63 * 300
+
+
+def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
               max_steps: int = 30, seed: int = 0, train_preset: str | None = None,
-              time_mode: str = "code") -> Path | None:
+              time_mode: str = "code", whole_database: str = "with") -> Path | None:
     """Regenerate Table I and Figs. 4-5 (see the module docstring); returns the report path
-    on rank 0."""
+    on rank 0.
+
+    Args:
+        whole_database: which cells also get the harder protocol, goals drawn from the whole
+            database: "with" (the 12 cells with reinitialisation), "all" or "none".
+    """
+    import time
+
     from dlo_course import mpi
     from dlo_course.learning_curves import plot_learning_curves
 
+    if whole_database not in WHOLE_DATABASE_CELLS:
+        raise ValueError(f"whole_database must be one of {sorted(WHOLE_DATABASE_CELLS)}")
     out = Path(out)
     paper = read_paper_table()
     if train_preset is not None:
         checkpoints = train_agents(train_preset, out, seed)
     checkpoints = Path(checkpoints or CHECKPOINT_DIR)
-    rows = evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode)
+    start = time.perf_counter()
+    rows = evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode, protocol="test")
+    test_minutes = (time.perf_counter() - start) / 60
+    scope = WHOLE_DATABASE_CELLS[whole_database]
+    whole_cells = [c for c in table1_cells() if scope is None or c.reinit == scope]
+    whole_rows = (evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode,
+                                 cells=whole_cells, protocol="whole") if whole_cells else [])
+    whole_minutes = (time.perf_counter() - start) / 60 - test_minutes
     if not mpi.is_root():
         return None
     csv_path, md_path = write_table(rows, paper, out)
+    tables = [("## Table I: ours beside the paper's, on the paper's test goals", md_path,
+               f"Goals: {GOAL_PROTOCOLS['test']}. {test_minutes:.0f} min on "
+               f"{mpi.size()} rank(s).")]
+    if whole_rows:
+        _, whole_md = write_table(whole_rows, paper, out, name="table1_whole_database")
+        tables.append(("## The harder protocol: goals from the whole database", whole_md,
+                       f"Goals: {GOAL_PROTOCOLS['whole']}; the paper's numbers are those of "
+                       f"its test goals, for comparison. {whole_minutes:.0f} min."))
     import matplotlib
 
     matplotlib.use("Agg")
@@ -326,27 +419,36 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 20,
         f"Time per action: `{time_mode}` ("
         + ("3 ms of physics per action, as in the authors' code" if time_mode == "code"
            else "0.06 s of physics per action, as in the paper's text") + ").",
-        "Goals: drawn uniformly from the whole database, " + database_protocols() + ".",
+        "Databases: " + database_protocols() + ". "
+        "A verdict \"above\" or \"below\" means the paper's done % lies outside our 95% "
+        "interval.",
         "",
-        "## Training budgets (the paper: 32 agents x 63 episodes x 300 steps = 604 800 "
-        "transitions, gradients summed, under 3.5 h on 32 cores)",
+        f"## Training budgets (the paper: 32 agents x 63 episodes x 300 steps = "
+        f"{PAPER_TRANSITIONS:,} transitions, gradients summed, under 3.5 h on 32 cores, about "
+        f"{PAPER_CORE_HOURS:.0f} core-hours)",
         "",
-        "| nodes | ranks | episodes per agent x steps | transitions | wall time (h) | "
-        "gradient reduction | course options | seed | commit |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| nodes | ranks | episodes per agent x steps | transitions (share of the paper's) | "
+        "wall time (h) | core-hours | gradient reduction | course options | seed | commit |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for n, rec in records.items():
-        wall = rec.get("wall_time_h")
-        lines.append(f"| {n} | {rec.get('ranks', '?')} | {rec.get('episodes_per_agent', '?')} x "
-                     f"{rec.get('steps_per_episode', '?')} | {rec.get('transitions', '?')} | "
-                     f"{'?' if wall is None else f'{wall:.2f}'} | "
+        wall, ranks, transitions = rec.get("wall_time_h"), rec.get("ranks"), rec.get("transitions")
+        share = f" ({transitions / PAPER_TRANSITIONS:.1%})" if transitions else ""
+        core_hours = f"{wall * ranks:.2f}" if wall is not None and ranks else "?"
+        lines.append(f"| {n} | {ranks or '?'} | {rec.get('episodes_per_agent', '?')} x "
+                     f"{rec.get('steps_per_episode', '?')} | {transitions or '?'}{share} | "
+                     f"{'?' if wall is None else f'{wall:.2f}'} | {core_hours} | "
                      f"{rec.get('reduce', '?')} | {course_options(rec)} | "
                      f"{rec.get('seed', '?')} | {rec.get('commit', '?')} |")
     lines += ["", "Course options (not in the paper, docs/design.md): input scaling, pre-tanh "
-              "penalty, updates per environment step, OU sigma when it differs from 0.3."]
-    lines += ["", "## Table I: ours beside the paper's", "", md_path.read_text(),
-              f"Files: `{csv_path.name}`, `{md_path.name}`, `fig4_learning_curves.png`, "
-              f"`{fig5.name}`."]
+              "penalty, updates per environment step, OU sigma when it differs from 0.3, and "
+              "the training levers (hindsight relabelling, no reset between episodes, batch "
+              "and buffer sizes, TD3's twin critics, policy delay and target noise)."]
+    for title, path, note in tables:
+        lines += ["", title, "", note, "", path.read_text()]
+    lines += [f"Files: `{csv_path.name}`, `{md_path.name}`"
+              + (", `table1_whole_database.csv`, `table1_whole_database.md`" if whole_rows
+                 else "") + f", `fig4_learning_curves.png`, `{fig5.name}`."]
     report = out / "report.md"
     report.write_text("\n".join(lines) + "\n")
     return report

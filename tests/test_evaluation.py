@@ -13,8 +13,8 @@ from dlo_course.ddpg import Actor, Critic, save_network
 from dlo_course.env import DLOShapeEnv
 from dlo_course.simulation import SimParams
 from dlo_course.evaluation import (
-    CheckpointError, EpisodeRecord, evaluate, goal_schedule, load_actor, run_episodes,
-    summarize, wilson_interval,
+    CheckpointError, EpisodeRecord, EpisodeTrace, evaluate, evaluate_thresholds, goal_schedule,
+    load_actor, run_episodes, summarize, wilson_interval,
 )
 
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
@@ -110,6 +110,41 @@ def test_parallel_split_equals_one_process_with_reinitialization(checkpoint, goa
         env.close()
     assert sorted(rank0 + rank1, key=lambda r: r.episode) == one
     assert [r.goal_index for r in one] == list(schedule)
+
+
+def test_one_trace_scores_every_threshold_above_its_own():
+    trace = EpisodeTrace(0.2, (0.12, 0.06, 0.045, 0.028, 0.02))
+    assert trace.record(3, 7, 0.05) == EpisodeRecord(3, 7, True, 0.045, 3, 0.2)
+    assert trace.record(3, 7, 0.03) == EpisodeRecord(3, 7, True, 0.028, 4, 0.2)
+    assert trace.record(3, 7, 0.01) == EpisodeRecord(3, 7, False, 0.02, 5, 0.2)
+    assert EpisodeTrace(0.2, ()).record(0, 0, 0.05).final_distance == 0.2
+
+
+def test_shared_thresholds_equal_separate_runs(checkpoint, goals_2):
+    """With reinitialisation, one run at 0.03 m scores 0.05 m exactly as a run at 0.05 m
+    does; episodes with a goal already played are not simulated again."""
+    shared = evaluate_thresholds(checkpoint, goals_2, (0.05, 0.03), episodes=5, max_steps=3,
+                                 seed=2, show_progress=False)
+    for threshold in (0.05, 0.03):
+        summary, records = evaluate(checkpoint, goals_2, threshold, episodes=5, max_steps=3,
+                                    seed=2, show_progress=False)
+        assert shared[threshold][1] == records and shared[threshold][0] == summary
+    assert any(r.done for r in shared[0.05][1])  # the test means something at 0.05 m
+
+
+def test_repeated_goals_are_simulated_once_with_reinitialization(checkpoint, goals_2):
+    actor, _ = load_actor(checkpoint)
+    env = DLOShapeEnv(n_nodes=2, goals=goals_2, threshold=0.05)
+    resets = []
+    original = env.reset
+    env.reset = lambda **kw: (resets.append(kw), original(**kw))[1]
+    try:
+        records = run_episodes(actor, env, [0, 1, 2], np.array([1, 1, 1]), True, max_steps=2)
+    finally:
+        env.close()
+    assert len(resets) == 1
+    assert records[0].done == records[2].done and records[0].final_distance == records[2].final_distance
+    assert [r.episode for r in records] == [0, 1, 2]
 
 
 def test_without_reinitialization_episodes_continue_from_the_last_shape(checkpoint, goals_2):

@@ -39,6 +39,26 @@ def test_table_sets_our_numbers_beside_the_papers(tmp_path):
     assert float(first["done_diff"]) == pytest.approx(90.0 - 99.5)
     assert float(first["mean_diff"]) == pytest.approx(0.04 - 0.03010)
     assert md_path.read_text().count("\n") == 26  # header, rule, 24 settings
+    # The paper's 99.5 % lies above our interval 59.6-98.2: below the paper, significantly.
+    assert first["verdict"] == "below"
+
+
+def test_verdicts_against_the_papers_done_percent():
+    from dlo_course.reproduce import verdict
+
+    row = {"done_ci_low": 90.0, "done_ci_high": 99.0}
+    assert verdict(row, 99.5) == "below"
+    assert verdict(row, 95.0) == verdict(row, 90.0) == verdict(row, 99.0) == "within"
+    assert verdict(row, 80.0) == "above"
+
+
+def test_goal_sources_of_the_two_protocols():
+    from dlo_course.reproduce import goal_source
+
+    assert goal_source("small", "test") == "small-test"
+    assert goal_source("large", "whole") == "large"
+    with pytest.raises(ValueError):
+        goal_source("small", "random")
 
 
 def test_reproduce_flag_errors():
@@ -66,6 +86,8 @@ def test_cluster_script_runs_the_whole_pipeline_with_the_smoke_preset(tmp_path):
     with open(report / "table1.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     assert len(rows) == 24 and all(int(r["episodes"]) == 2 for r in rows)
+    with open(report / "table1_whole_database.csv", newline="") as f:
+        assert len(list(csv.DictReader(f))) == 12  # the cells with reinitialisation
     for name in ("table1.md", "report.md", "fig4_learning_curves.png", "fig5_deformation.png"):
         assert (report / name).stat().st_size > 0
     for n in (2, 4, 6):
@@ -90,7 +112,7 @@ def test_ship_run_copies_the_networks_and_writes_the_training_record(tmp_path):
     assert record["ranks"] == 1 and record["seed"] == 4 and record["note"] == "test"
     assert record["episodes_per_agent"] == 2 and record["transitions"] == 40
     assert record["commit"]  # this test runs from a git checkout
-    assert course_options(record) == "input scaling, 2 updates/step"
+    assert course_options(record) == "input scaling, 2 updates/step, batch 8"
     assert course_options({}) == "none"
     with pytest.raises(FileNotFoundError, match="not a finished run"):
         ship_run(tmp_path / "nowhere", tmp_path / "x")
