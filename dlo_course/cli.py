@@ -269,8 +269,10 @@ def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...]) -> None
               help="Goals: 'small-test' or 'large-test' (the goals of the paper's Table I), "
                    "'small' or 'large' (the whole database), a database .npz, or a .npy "
                    "array (K, nodes, 3).")
-@click.option("--threshold", type=click.FloatRange(min=0, min_open=True), default=0.05,
-              show_default=True, help="Success distance (m).")
+@click.option("--threshold", "thresholds", type=click.FloatRange(min=0, min_open=True),
+              multiple=True, help="Success distance (m) [0.05]. Repeat it to score the same "
+              "goals at several thresholds: with reinitialisation the episodes are then run "
+              "once, at the smallest.")
 @click.option("--no-reinit", is_flag=True,
               help="Start each episode from the shape the previous one ended in.")
 @click.option("--episodes", type=click.IntRange(min=1), default=1000, show_default=True)
@@ -283,37 +285,42 @@ def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...]) -> None
               show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the summary and every episode as JSON.")
-def evaluate(checkpoint: Path, goals: str, threshold: float, no_reinit: bool, episodes: int,
-             max_steps: int, seed: int, n_nodes: str | None, time_mode: str,
+def evaluate(checkpoint: Path, goals: str, thresholds: tuple[float, ...], no_reinit: bool,
+             episodes: int, max_steps: int, seed: int, n_nodes: str | None, time_mode: str,
              out: Path | None) -> None:
     """The paper's test protocol (Table I) for one checkpoint; parallel under mpiexec."""
     import json
     from dataclasses import asdict
 
-    from dlo_course.evaluation import CheckpointError, evaluate as run
+    from dlo_course.evaluation import CheckpointError, evaluate_thresholds
 
+    thresholds = thresholds or (0.05,)
     try:
-        summary, records = run(checkpoint, goals=goals, threshold=threshold,
-                               reinitialize=not no_reinit, episodes=episodes,
-                               max_steps=max_steps, seed=seed,
-                               n_nodes=None if n_nodes is None else int(n_nodes),
-                               time_mode=time_mode)
+        results = evaluate_thresholds(checkpoint, goals, thresholds,
+                                      reinitialize=not no_reinit, episodes=episodes,
+                                      max_steps=max_steps, seed=seed,
+                                      n_nodes=None if n_nodes is None else int(n_nodes),
+                                      time_mode=time_mode)
     except (CheckpointError, FileNotFoundError, ValueError) as err:
         raise click.ClickException(str(err)) from None
-    if summary is None:  # not rank 0
-        return
-    s = summary
-    click.echo(f"{'with' if not no_reinit else 'without'} reinitialization, {goals} goals, "
-               f"threshold {threshold} m, {s.episodes} episodes of at most {max_steps} steps")
-    click.echo(f"done {s.done_percent:.1f}% (95% CI {s.done_ci_low:.1f}-{s.done_ci_high:.1f}), "
-               f"final distance {s.mean_distance:.5f} +- {s.std_distance:.5f} m, "
-               f"best {s.best_distance:.5f} m")
+    written = {}
+    for threshold, (s, records) in results.items():
+        if s is None:  # not rank 0
+            return
+        click.echo(f"{'with' if not no_reinit else 'without'} reinitialization, {goals} "
+                   f"goals, threshold {threshold} m, {s.episodes} episodes of at most "
+                   f"{max_steps} steps")
+        click.echo(f"done {s.done_percent:.1f}% (95% CI {s.done_ci_low:.1f}-"
+                   f"{s.done_ci_high:.1f}), final distance {s.mean_distance:.5f} +- "
+                   f"{s.std_distance:.5f} m, best {s.best_distance:.5f} m")
+        written[threshold] = {"threshold": threshold, "summary": s.as_dict(),
+                              "episodes": [asdict(r) for r in records]}
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(json.dumps({"summary": s.as_dict(),
-                                   "episodes": [asdict(r) for r in records]}, indent=1))
+        # One threshold: {"summary", "episodes"}; several: a list of those, with "threshold".
+        data = next(iter(written.values())) if len(written) == 1 else list(written.values())
+        out.write_text(json.dumps(data, indent=1))
         click.echo(f"wrote {out}")
-
 
 
 # --- course: release / grade ---

@@ -224,3 +224,21 @@ def test_shipped_agents_load_with_their_training_record(n_nodes):
     other = 4 if n_nodes != 4 else 6
     with pytest.raises(CheckpointError, match=f"trained for {n_nodes} nodes"):
         load_actor(folder, other)
+
+
+def test_cli_scores_several_thresholds(tmp_path, checkpoint, goals_2):
+    from click.testing import CliRunner
+
+    from dlo_course.cli import main
+
+    goal_file = tmp_path / "goals.npy"
+    np.save(goal_file, goals_2)
+    out = tmp_path / "two.json"
+    result = CliRunner().invoke(main, [
+        "evaluate", "--checkpoint", str(checkpoint), "--database", str(goal_file),
+        "--threshold", "0.05", "--threshold", "0.03", "--episodes", "3", "--max-steps", "2",
+        "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert [d["threshold"] for d in data] == [0.05, 0.03]
+    assert all(d["summary"]["episodes"] == 3 for d in data)
