@@ -9,6 +9,7 @@ from click.testing import CliRunner
 
 from dlo_course.cli import main, train as train_command
 from dlo_course.ddpg import DDPG, DDPGConfig, load_network
+from dlo_course.learning_curves import read_progress
 from dlo_course.noise import OUNoise
 from dlo_course.replay_buffer import ReplayBuffer
 from dlo_course.trainer import (PRESETS, PROGRESS_COLUMNS, TrainConfig, load_config, make_env,
@@ -428,3 +429,21 @@ def test_keep_shape_between_episodes_on_the_rod(tmp_path):
     starts_rebuilt, _ = two_episodes(keep_shape=False)
     np.testing.assert_array_equal(starts_rebuilt[1][shape], starts_rebuilt[0][shape])
     np.testing.assert_array_equal(starts_rebuilt[0], starts[0])
+
+
+def test_recipe_smoke_run_on_the_rod(tmp_path):
+    """The recipe's levers together, on the real rod, in one process: 2 episodes of 6
+    actions (a batch of 16 so that updates start), then a resume for one more episode."""
+    config = preset("recipe", episodes=2, steps_per_episode=6, out_dir=str(tmp_path / "run"),
+                    checkpoint_every=1, expected_agents=None)
+    config.ddpg.batch_size = 16
+    train(config, progress=False)
+    progress = read_progress(tmp_path / "run")
+    assert list(progress["episode"]) == [1, 2]
+    assert progress["updates"][-1] > 0  # HER copies filled a batch within the first episode
+    saved = json.loads((tmp_path / "run" / "config.json").read_text())["config"]
+    assert saved["her_k"] == 4 and saved["reset_between_episodes"] is False
+    assert saved["ddpg"]["twin_critics"] is True
+    config.episodes = 3
+    train(config, resume=True, progress=False)
+    assert list(read_progress(tmp_path / "run")["episode"]) == [1, 2, 3]
