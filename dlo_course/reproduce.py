@@ -250,6 +250,19 @@ def ship_run(run_dir: Path, dest: Path, **extra: Any) -> Path:
     dest.mkdir(parents=True, exist_ok=True)
     for name in SHIPPED_FILES:
         shutil.copy2(run_dir / name, dest / name)
+    # A run stopped between checkpoints: its networks are the last checkpoint's, so its
+    # learning curve and record stop there too.
+    latest = run_dir / "checkpoints" / "latest.json"
+    if latest.is_file():
+        done = int(json.loads(latest.read_text())["episodes_done"])
+        with open(dest / "progress.csv", newline="") as f:
+            reader = csv.DictReader(f)
+            rows = [row for row in reader if int(row["episode"]) <= done]
+            fields = reader.fieldnames
+        with open(dest / "progress.csv", "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=fields)
+            writer.writeheader()
+            writer.writerows(rows)
     record = {**_run_record(dest), **{k: v for k, v in extra.items() if v is not None}}
     (dest / "record.json").write_text(json.dumps(record, indent=2) + "\n")
     return dest

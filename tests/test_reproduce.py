@@ -1,6 +1,7 @@
 """The reproduction: Table I's layout, the report, and the whole pipeline in its smoke size."""
 
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -116,3 +117,11 @@ def test_ship_run_copies_the_networks_and_writes_the_training_record(tmp_path):
     assert course_options({}) == "none"
     with pytest.raises(FileNotFoundError, match="not a finished run"):
         ship_run(tmp_path / "nowhere", tmp_path / "x")
+    # A run killed after its last checkpoint: its curve is shipped up to that checkpoint,
+    # like its networks.
+    with open(run / "progress.csv") as f:
+        lines = f.read().splitlines()
+    with open(run / "progress.csv", "a") as f:
+        f.write(lines[-1].replace("2,", "3,", 1) + "\n")  # an episode 3, never checkpointed
+    killed = ship_run(run, tmp_path / "killed")
+    assert json.loads((killed / "record.json").read_text())["episodes_per_agent"] == 2
