@@ -338,12 +338,27 @@ def course_group() -> None:
               help="Folder to write the student notebooks to [the repository's lessons/].")
 @click.option("--check", is_flag=True,
               help="Write nothing; fail if lessons/ differs from what release would write.")
-def course_release(solutions: Path | None, lessons: Path | None, check: bool) -> None:
+@click.option("--student", "student_dir", type=click.Path(file_okay=False, path_type=Path),
+              default=None,
+              help="Instead, write the student bundle to this new folder: the repository "
+                   "with fresh lessons/, without solutions/ and the tests that hold answers.")
+def course_release(solutions: Path | None, lessons: Path | None, check: bool,
+                   student_dir: Path | None) -> None:
     """Write lessons/ from solutions/: solutions replaced by NotImplementedError, no outputs."""
     from dlo_course import course as course_lib
 
     solutions = solutions or course_lib.SOLUTIONS_DIR
     lessons = lessons or course_lib.LESSONS_DIR
+    if student_dir is not None:
+        if check or lessons != course_lib.LESSONS_DIR:
+            raise click.UsageError("--student writes a whole bundle: no --check or --lessons")
+        try:
+            files = course_lib.release_student(student_dir, solutions=solutions)
+        except (ValueError, FileNotFoundError) as err:
+            raise click.ClickException(str(err)) from err
+        click.echo(f"wrote the student bundle to {student_dir}: {len(files)} files, without "
+                   f"solutions/ and the tests that hold answers")
+        return
     try:
         result = course_lib.release(solutions, lessons, check=check)
     except (ValueError, FileNotFoundError) as err:
@@ -366,13 +381,16 @@ def course_release(solutions: Path | None, lessons: Path | None, check: bool) ->
               default=None, help="Grading tests [the repository's tests/grading].")
 @click.option("--timeout", type=float, default=1800, show_default=True,
               help="Seconds allowed for one student's whole grading run.")
-def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: float) -> None:
+@click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Students graded at the same time (one per core is about right).")
+def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: float,
+                 jobs: int) -> None:
     """Grade SUBMISSIONS/<student>/ notebook folders; one CSV row of points per student."""
     from dlo_course import course as course_lib
 
     try:
         rows = course_lib.grade(submissions, out, tests or course_lib.GRADING_TESTS_DIR,
-                                timeout=timeout)
+                                timeout=timeout, jobs=jobs)
     except (ValueError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from err
     for row in rows:

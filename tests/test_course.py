@@ -248,3 +248,105 @@ def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path,
     started = time.perf_counter()
     client.execute()
     assert time.perf_counter() - started < 240, f"{path.name} is too slow on the fast budget"
+
+
+def class_of(root: Path, n_students: int = 30) -> dict[str, dict[str, float]]:
+    """``n_students`` copies of lessons/ with mixed answers (each exercise solved, left
+    unsolved or answered wrongly, by a mutant of the mutation suite); one student hands in
+    nothing for the last lesson. Returns the points each student should get."""
+    from test_mutations import MUTANTS, mutate
+
+    points = catalog()
+    solved = {}
+    for path in NOTEBOOKS:
+        for cell in course.read_notebook(path)["cells"]:
+            info = course.exercise_info(cell)
+            if info:
+                solved[info["exercise"]] = course.cell_source(cell)
+    expected = {}
+    for i in range(n_students):
+        name = f"student{i:02d}"
+        (root / name).mkdir(parents=True)
+        expected[name] = {}
+        for path in course.notebooks_in(LESSONS):
+            if i == n_students - 1 and path == course.notebooks_in(LESSONS)[-1]:
+                expected[name].update({e["exercise"]: 0 for e in course.exercises(SOLUTIONS)
+                                       if e["notebook"] == path.stem})
+                continue
+            nb = course.read_notebook(path)
+            for cell in nb["cells"]:
+                info = course.exercise_info(cell)
+                if info is None:
+                    continue
+                exercise = info["exercise"]
+                j = list(points).index(exercise)
+                choice = (7 * i + 3 * j) % 4  # 0: unsolved, 1-2: solved, 3: a wrong answer
+                got = 0
+                if choice in (1, 2):
+                    cell["source"] = solved[exercise].splitlines(keepends=True)
+                    got = points[exercise]
+                elif choice == 3:
+                    old, new = MUTANTS[exercise][0][1:3]
+                    cell["source"] = mutate(solved[exercise], old, new).splitlines(keepends=True)
+                expected[name][exercise] = got
+            course.write_notebook(nb, root / name / path.name)
+    return expected
+
+
+def test_grading_a_class_of_30_gives_the_right_csv(tmp_path):
+    expected = class_of(tmp_path / "submissions")
+    out = tmp_path / "grades.csv"
+    started = time.perf_counter()
+    result = CliRunner().invoke(main, ["course", "grade", str(tmp_path / "submissions"),
+                                       "--out", str(out), "--jobs", "2"])
+    elapsed = time.perf_counter() - started
+    assert result.exit_code == 0, result.output
+    with out.open(newline="") as f:
+        reader = csv.DictReader(f)
+        assert reader.fieldnames == ["student", *catalog(), "total", "max_total", "error"]
+        rows = {row["student"]: row for row in reader}
+    assert list(rows) == sorted(expected)
+    for student, points in expected.items():
+        row = rows[student]
+        got = {name: float(row[name]) for name in points}
+        assert got == {name: float(p) for name, p in points.items()}, student
+        assert float(row["total"]) == sum(points.values())
+        assert float(row["max_total"]) == sum(catalog().values())
+        assert row["error"] == ""
+    print(f"graded 30 students in {elapsed:.0f} s")
+
+
+def test_student_bundle_has_no_solutions_and_no_answers(tmp_path):
+    bundle = tmp_path / "bundle"
+    result = CliRunner().invoke(main, ["course", "release", "--student", str(bundle)])
+    assert result.exit_code == 0, result.output
+    files = {p.relative_to(bundle).as_posix() for p in bundle.rglob("*") if p.is_file()}
+    assert "README.md" in files and "dlo_course/course.py" in files and "pyproject.toml" in files
+    for left_out in course.STUDENT_EXCLUDE:
+        if left_out != "lessons/":
+            assert not any(f == left_out or f.startswith(left_out) for f in files), left_out
+    for path in NOTEBOOKS:
+        assert (bundle / "lessons" / path.name).read_bytes() == \
+            (LESSONS / path.name).read_bytes()
+    for name in files:
+        if name.endswith(".ipynb"):
+            text = (bundle / name).read_text(encoding="utf-8")
+            assert course.SOLUTION_BEGIN not in text
+    # the grader stays, for self-grading; no file quotes a solution block's lines
+    assert "tests/grading/conftest.py" in files
+    answers = set()
+    for path in NOTEBOOKS:
+        for cell in course.read_notebook(path)["cells"]:
+            source = course.cell_source(cell)
+            if course.exercise_info(cell) and course.SOLUTION_BEGIN in source:
+                block = source.split(course.SOLUTION_BEGIN, 1)[1].split(course.SOLUTION_END)[0]
+                answers.add(block.strip())
+    for name in files:
+        if name.startswith(("tests/", "lessons/")):
+            text = (bundle / name).read_text(encoding="utf-8", errors="replace")
+            assert not [a for a in answers if a in text], name
+    # refuses to write into the repository or over a folder that holds files
+    again = CliRunner().invoke(main, ["course", "release", "--student", str(bundle)])
+    assert again.exit_code != 0 and "not empty" in again.output
+    inside = CliRunner().invoke(main, ["course", "release", "--student", str(REPO / "bundle")])
+    assert inside.exit_code != 0 and "outside the repository" in inside.output

@@ -9,13 +9,22 @@ These tests are collected only when targeted: the plain ``python -m pytest`` of 
 skips this folder (``tests/test_course.py`` runs the grader on the solutions and lessons).
 
 Each test declares the notebook (module-level ``pytestmark``) and the exercise it grades with
-its points: ``@pytest.mark.exercise("bellman_target", points=2)``. It receives the student's
-function through the ``exercise`` fixture: the grader runs only the notebook's setup cells and
-its exercise cells up to that one, in a fresh namespace
-(:class:`dlo_course.course.ExerciseNotebook`), and compares behaviour with the library's
-reference implementation on fixed inputs, never the source text. A crash or an endless loop
-costs only that exercise: every test has a timeout (pytest-timeout; 60 s, or
-``DLO_COURSE_GRADING_TIMEOUT`` seconds).
+its points and the library's reference answer:
+``@pytest.mark.exercise("bellman_target", points=2, reference="dlo_course.ddpg.bellman_target")``
+(several tests of one exercise share its points: partial credit). It receives the exercise
+through the ``student`` fixture (:class:`Student`): ``student.run(probe, *args)`` runs
+``probe(student_object, *args)`` in the grading sandbox (:class:`dlo_course.course.Sandbox`:
+a forked child process with time, memory and file-system limits, in a scratch folder, which
+runs only the notebook's setup cells and its exercise cells up to that one) and returns what
+the probe returns, as plain data. The test then compares that data, in the grader's own
+process, with the same probe run on the reference, never the source text. So the student's
+code can neither see nor change the checks: patching torch, numpy, pytest or the grader,
+writing outside the scratch folder, a crash or an endless loop costs only that exercise
+(``DLO_COURSE_GRADING_TIMEOUT`` seconds per probe, 60 by default;
+``DLO_COURSE_GRADING_MEMORY_MB`` of memory, 3072). An exercise cell that uses the library
+(which holds the reference answers) is rejected before it runs
+(:func:`dlo_course.course.delegation_problems`), and the reference raises if the answer
+reaches it anyway.
 """
 
 from __future__ import annotations
@@ -89,7 +98,9 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         exercise, notebook = _markers(item)
         if exercise is not None and item.get_closest_marker("timeout") is None:
-            item.add_marker(pytest.mark.timeout(DEFAULT_TIMEOUT))
+            # the sandbox enforces DEFAULT_TIMEOUT per probe; this is the backstop (the
+            # first test also waits for the sandbox to start)
+            item.add_marker(pytest.mark.timeout(2 * DEFAULT_TIMEOUT + 180))
 
 
 def pytest_collection_finish(session):
@@ -113,8 +124,13 @@ def pytest_runtest_logreport(report):
         # setup: the fixture could not extract the exercise (missing, or its cell fails)
         record["outcome"] = {"call": "failed", "setup": "not loaded"}.get(report.when,
                                                                           "error (teardown)")
-        if "Timeout (>" in str(report.longrepr):
+        text = str(report.longrepr)
+        if "Timeout (>" in text or "longer than its time limit" in text:
             record["outcome"] = "timeout"
+        elif "rejected, the answer is not written in the exercise cell" in text:
+            record["outcome"] = "delegates"
+        elif " (not loaded):" in text:
+            record["outcome"] = "not loaded"
         record["earned"] = 0
     elif report.skipped:
         record["outcome"], record["earned"] = "skipped", 0
@@ -160,27 +176,89 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
 # ------------------------------------------------------------------------ fixtures
 
 _BOOKS: dict[Path, object] = {}
+_SANDBOX = None
+_CACHE: dict[tuple, object] = {}
 
 
-def load_exercise(config, notebook: str, name: str):
-    """The student's ``name`` from ``notebook``; fails the test (only) if it cannot be had."""
-    from dlo_course.course import ExerciseError, ExerciseNotebook, find_notebook
+def sandbox():
+    """The session's sandbox (:class:`dlo_course.course.Sandbox`), started on first use."""
+    global _SANDBOX
+    if _SANDBOX is None:
+        from dlo_course.course import Sandbox
 
-    # Setup cells may plot or read the budget: headless, and small.
-    os.environ.setdefault("MPLBACKEND", "Agg")
-    os.environ.setdefault("DLO_COURSE_FAST", "1")
+        _SANDBOX = Sandbox(timeout=DEFAULT_TIMEOUT)
+    return _SANDBOX
+
+
+def pytest_unconfigure(config):
+    global _SANDBOX
+    if _SANDBOX is not None:
+        _SANDBOX.close()
+        _SANDBOX = None
+
+
+class Student:
+    """One exercise of the student's notebook, graded at arm's length.
+
+    :meth:`run` calls ``probe(student_object, *args)`` in a sandboxed child process and
+    returns what the probe returns, as data; the test then checks that data here, against
+    references computed in this (clean) process. A probe is a module-level function of the
+    test file: it drives the student's function or class on fixed inputs and returns plain
+    results (numbers, strings, containers, arrays, tensors). Running the same probe on the
+    library's reference gives what to compare with.
+    """
+
+    def __init__(self, path: Path, name: str, references: tuple[str, ...]):
+        self.path, self.name, self.references = path, name, references
+
+    def run(self, probe, *args):
+        import inspect
+
+        from dlo_course.course import SandboxError, encode_data
+
+        key = (str(self.path), self.name, inspect.getfile(probe), probe.__qualname__,
+               json.dumps(encode_data(args)))
+        if key not in _CACHE:
+            try:
+                _CACHE[key] = sandbox().run(self.path, self.name, inspect.getfile(probe),
+                                            probe.__qualname__, args, self.references)
+            except SandboxError as err:
+                _CACHE[key] = {"status": "error", "message": str(err), "output": ""}
+        result = _CACHE[key]
+        if result["status"] != "ok":
+            output = result.get("output", "").strip()
+            printed = f"\n--- what the exercise printed ---\n{output[-3000:]}" if output else ""
+            pytest.fail(f"{self.name} ({result['status']}):\n{result['message']}{printed}",
+                        pytrace=False)
+        return result["value"]
+
+
+def load_student(config, notebook: str, name: str, references=()) -> Student:
+    """The student's exercise ``name`` of ``notebook``, checked without running it: the cell
+    exists and does its own work (no delegation to the library). Fails the test otherwise."""
+    from dlo_course.course import (ExerciseError, ExerciseNotebook, delegation_message,
+                                   delegation_problems, find_notebook)
+
     try:
         path = find_notebook(notebooks_dir(config), notebook)
         if path not in _BOOKS:
             _BOOKS[path] = ExerciseNotebook.from_path(path)
-        return _BOOKS[path].load(name)
-    except ExerciseError as err:
+        book = _BOOKS[path]
+        source = book.source_of(name)
+    except (ExerciseError, ValueError, OSError) as err:
         pytest.fail(str(err), pytrace=False)
+    if isinstance(references, str):
+        references = (references,)
+    problems = delegation_problems(source, book.setup_sources, references)
+    if problems:
+        pytest.fail(delegation_message(name, problems), pytrace=False)
+    return Student(path, name, tuple(references))
 
 
 @pytest.fixture
-def exercise(request):
-    """The object the graded exercise cell defines (the test's ``exercise`` marker)."""
+def student(request):
+    """The graded exercise (the test's ``exercise`` marker) as a :class:`Student`."""
     notebook = request.node.get_closest_marker("notebook").args[0]
-    name = request.node.get_closest_marker("exercise").args[0]
-    return load_exercise(request.config, notebook, name)
+    marker = request.node.get_closest_marker("exercise")
+    return load_student(request.config, notebook, marker.args[0],
+                        marker.kwargs.get("reference", ()))

@@ -9,65 +9,125 @@ from dlo_course.ddpg import Actor, Critic, mlp
 
 pytestmark = pytest.mark.notebook("03_actor_and_critic")
 
+MLP_CASES = [(30, (256, 256, 256), 3, 3e-3), (5, (16, 8), 1, 0.1), (4, (), 2, 1e-2)]
 
-@pytest.mark.exercise("build_mlp", points=2)
-def test_build_mlp(exercise):
-    for in_dim, hidden, out_dim, final_init in [(30, (256, 256, 256), 3, 3e-3),
-                                                (5, (16, 8), 1, 0.1), (4, (), 2, 1e-2)]:
+
+def set_weights(net, in_dim):
+    """Give ``net`` fixed random weights (by shape, in order) and return its outputs on fixed
+    inputs: two networks with the same layers compute the same function."""
+    gen = torch.Generator().manual_seed(2)
+    with torch.no_grad():
+        for p in net.parameters():
+            p.copy_(torch.randn(p.shape, generator=gen) * 0.5)
+        return net(torch.randn(64, in_dim, generator=gen) * 3)
+
+
+def probe_build_mlp(fn):
+    """Per case: the parameters as built, and the outputs with the set_weights weights."""
+    out = []
+    for in_dim, hidden, out_dim, final_init in MLP_CASES:
         torch.manual_seed(0)
-        net = exercise(in_dim, hidden, out_dim, final_init)
-        assert isinstance(net, nn.Module)
+        net = fn(in_dim, hidden, out_dim, final_init)
+        params = [p.detach().clone() for p in net.parameters()]
+        out.append({"module": isinstance(net, nn.Module), "params": params,
+                    "outputs": set_weights(net, in_dim)})
+    return out
+
+
+@pytest.mark.exercise("build_mlp", points=2, reference="dlo_course.ddpg.mlp")
+def test_build_mlp(student):
+    check_build_mlp(student.run(probe_build_mlp))
+
+
+def check_build_mlp(got):
+    for (in_dim, hidden, out_dim, final_init), mine in zip(MLP_CASES, got, strict=True):
+        assert mine["module"], "return an nn.Module (an nn.Sequential)"
         reference = mlp(in_dim, hidden, out_dim, final_init)
-        got_params, ref_params = list(net.parameters()), list(reference.parameters())
-        assert [tuple(p.shape) for p in got_params] == [tuple(p.shape) for p in ref_params], \
+        ref_params = list(reference.parameters())
+        assert [tuple(p.shape) for p in mine["params"]] == [tuple(p.shape) for p in ref_params], \
             "the layers (and their order) differ from Linear-ReLU ... Linear"
-        weight, bias = got_params[-2], got_params[-1]
+        weight, bias = mine["params"][-2], mine["params"][-1]
         for name, p in (("weight", weight), ("bias", bias)):
             assert p.abs().max().item() <= final_init + 1e-9, f"output {name} outside +-final_init"
-            if p.numel() >= 3:
-                assert p.std().item() > final_init / 10, f"output {name} is not uniform"
+        # uniform in +-final_init, not zero, not constant: with n >= 9 output parameters a
+        # correct initialisation fails this with probability 0.1**n <= 1e-9
+        pooled = torch.cat([weight.reshape(-1), bias.reshape(-1)])
+        assert pooled.abs().max().item() >= final_init / 10 and pooled.unique().numel() > 1, \
+            "the output layer is not initialised uniformly in [-final_init, final_init]"
         if hidden:  # hidden layers keep PyTorch's default, uniform in +-1/sqrt(fan-in)
             bound = 1 / np.sqrt(in_dim)
-            assert 0.5 * bound < got_params[0].abs().max().item() <= bound + 1e-6, \
+            assert 0.5 * bound < mine["params"][0].abs().max().item() <= bound + 1e-6, \
                 "the hidden layers must keep PyTorch's default initialisation"
         # same weights -> same function: the activations sit in the right places
-        with torch.no_grad():
-            for mine, ref in zip(got_params, ref_params):
-                mine.copy_(ref)
-            x = torch.randn(64, in_dim) * 3
-            torch.testing.assert_close(net(x), reference(x))
+        torch.testing.assert_close(mine["outputs"], set_weights(reference, in_dim))
 
 
-@pytest.mark.exercise("squash_action", points=2)
-def test_squash_action(exercise):
+SQUASH_BOXES = [([-1.0] * 3, [1.0] * 3), ([-2.0], [2.0]), ([0.0, -5.0], [1.0, 3.0])]
+
+
+def reference_squash_action(raw, low, high):
+    act_dim = len(low)
+    actor = Actor(act_dim, act_dim, np.array(low.tolist()), np.array(high.tolist()),
+                  hidden_sizes=())
+    actor.net = nn.Identity()  # the library's forward on the raw outputs themselves
+    return actor(raw)
+
+
+def probe_squash_action(fn):
     gen = torch.Generator().manual_seed(3)
-    for low, high in [([-1.0] * 3, [1.0] * 3), ([-2.0], [2.0]), ([0.0, -5.0], [1.0, 3.0])]:
-        act_dim = len(low)
-        actor = Actor(act_dim, act_dim, np.array(low), np.array(high), hidden_sizes=())
-        actor.net = nn.Identity()  # the library's forward on the raw outputs themselves
-        raw = torch.randn(50, act_dim, generator=gen) * 4
-        got = torch.as_tensor(exercise(raw.clone(), torch.tensor(low), torch.tensor(high)))
-        assert got.shape == raw.shape
-        torch.testing.assert_close(got.float(), actor(raw))
+    out = []
+    for low, high in SQUASH_BOXES:
+        raw = torch.randn(50, len(low), generator=gen) * 4
+        out.append(torch.as_tensor(fn(raw.clone(), torch.tensor(low), torch.tensor(high))))
+    return out
 
 
-@pytest.mark.exercise("critic_value", points=1)
-def test_critic_value(exercise):
+@pytest.mark.exercise("squash_action", points=2, reference="dlo_course.ddpg.Actor.forward")
+def test_squash_action(student):
+    got = student.run(probe_squash_action)
+    want = probe_squash_action(reference_squash_action)
+    for mine, ref in zip(got, want, strict=True):
+        assert mine.shape == ref.shape
+        torch.testing.assert_close(mine.float(), ref)
+
+
+def critics():
     torch.manual_seed(4)
     for obs_dim, act_dim in [(30, 3), (3, 1)]:
         critic = Critic(obs_dim, act_dim, hidden_sizes=(32, 32), final_init=0.5)
-        obs, act = torch.randn(17, obs_dim), torch.randn(17, act_dim)
-        got = exercise(critic.net, obs, act)
-        assert tuple(got.shape) == (17, 1), f"shape {tuple(got.shape)}, expected (17, 1)"
-        torch.testing.assert_close(got, critic(obs, act))
+        yield critic, torch.randn(17, obs_dim), torch.randn(17, act_dim)
+
+
+def probe_critic_value(fn):
+    return [torch.as_tensor(fn(critic.net, obs, act)) for critic, obs, act in critics()]
+
+
+@pytest.mark.exercise("critic_value", points=1, reference="dlo_course.ddpg.Critic.forward")
+def test_critic_value(student):
+    got = student.run(probe_critic_value)
+    for mine, (critic, obs, act) in zip(got, critics(), strict=True):
+        assert tuple(mine.shape) == (17, 1), f"shape {tuple(mine.shape)}, expected (17, 1)"
+        with torch.no_grad():
+            torch.testing.assert_close(mine, critic(obs, act))
+
+
+COUNT_CASES = [(18, 3, (256, 256, 256)), (30, 3, (256, 256, 256)), (42, 3, (256, 256, 256)),
+               (3, 1, (64, 32)), (5, 2, ())]
+
+
+def reference_parameter_counts(obs_dim, act_dim, hidden):
+    actor, critic = Actor(obs_dim, act_dim, hidden_sizes=hidden), \
+        Critic(obs_dim, act_dim, hidden_sizes=hidden)
+    return tuple(sum(p.numel() for p in m.parameters()) for m in (actor, critic))
+
+
+def probe_parameter_counts(fn):
+    return [tuple(int(n) for n in fn(*case)) for case in COUNT_CASES]
 
 
 @pytest.mark.exercise("parameter_counts", points=2)
-def test_parameter_counts(exercise):
-    for obs_dim, act_dim, hidden in [(18, 3, (256, 256, 256)), (30, 3, (256, 256, 256)),
-                                     (42, 3, (256, 256, 256)), (3, 1, (64, 32)), (5, 2, ())]:
-        actor, critic = Actor(obs_dim, act_dim, hidden_sizes=hidden), \
-            Critic(obs_dim, act_dim, hidden_sizes=hidden)
-        expected = tuple(sum(p.numel() for p in m.parameters()) for m in (actor, critic))
-        got = tuple(int(n) for n in exercise(obs_dim, act_dim, hidden))
-        assert got == expected, f"{got} for {(obs_dim, act_dim, hidden)}, expected {expected}"
+def test_parameter_counts(student):
+    got = student.run(probe_parameter_counts)
+    want = probe_parameter_counts(reference_parameter_counts)
+    for case, mine, ref in zip(COUNT_CASES, got, want, strict=True):
+        assert mine == ref, f"{mine} for {case}, expected {ref}"

@@ -1,4 +1,7 @@
-"""Grading: lesson 5, soft bodies (reference: dlo_course.mesh, dlo_course.simulation)."""
+"""Grading: lesson 5, soft bodies (reference: dlo_course.mesh, dlo_course.simulation).
+
+The meshes are built here and sent to the sandbox as arrays.
+"""
 
 import numpy as np
 import pytest
@@ -19,6 +22,14 @@ def random_meshes():
     yield TetMesh(points, tets)
 
 
+TWO = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])  # two tetrahedra sharing the face (1, 2, 3)
+
+
+def probe_each(fn, inputs):
+    """fn(*args) for every args of inputs, as arrays."""
+    return [np.asarray(fn(*[np.array(a) for a in args])) for args in inputs]
+
+
 def as_row_set(rows, width):
     rows = np.asarray(rows)
     assert rows.ndim == 2 and rows.shape[1] == width, \
@@ -26,40 +37,50 @@ def as_row_set(rows, width):
     return {tuple(sorted(int(i) for i in row)) for row in rows}
 
 
-def assert_same_rows_on_every_mesh(exercise, reference, width, noun):
-    """exercise(tets) gives the rows of ``reference(mesh)`` (in any order) on every mesh."""
-    for mesh in random_meshes():
-        got = np.asarray(exercise(mesh.tets.copy()))
+def check_same_rows(got, meshes, reference, width, noun):
+    for rows, mesh in zip(got, meshes, strict=True):
         expected = reference(mesh)
-        assert len(got) == len(expected), f"{len(got)} {noun}, expected {len(expected)}"
-        assert as_row_set(got, width) == as_row_set(expected, width)
+        assert len(rows) == len(expected), f"{len(rows)} {noun}, expected {len(expected)}"
+        assert as_row_set(rows, width) == as_row_set(expected, width)
 
 
-@pytest.mark.exercise("tet_signed_volumes", points=2)
-def test_tet_signed_volumes(exercise):
-    for mesh in random_meshes():
-        got = np.asarray(exercise(mesh.points.copy(), mesh.tets.copy()), dtype=np.float64)
+@pytest.mark.exercise("tet_signed_volumes", points=2,
+                      reference="dlo_course.mesh.TetMesh.signed_volumes")
+def test_tet_signed_volumes(student):
+    meshes = list(random_meshes())
+    got = student.run(probe_each, [(m.points, m.tets) for m in meshes])
+    for volumes, mesh in zip(got, meshes, strict=True):
         expected = mesh.signed_volumes()
-        assert got.shape == expected.shape
-        np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-15)
+        assert volumes.shape == expected.shape
+        np.testing.assert_allclose(volumes.astype(np.float64), expected, rtol=1e-9, atol=1e-15)
 
 
-@pytest.mark.exercise("mesh_edges", points=2)
-def test_mesh_edges(exercise):
-    assert_same_rows_on_every_mesh(exercise, lambda mesh: mesh.edges, 2, "edges")
-    assert len(exercise(make_rod_mesh().tets)) == 789
+@pytest.mark.exercise("mesh_edges", points=2, reference="dlo_course.mesh.TetMesh.edges")
+def test_mesh_edges(student):
+    meshes = list(random_meshes())
+    got = student.run(probe_each, [(m.tets,) for m in meshes])
+    check_same_rows(got, meshes, lambda mesh: mesh.edges, 2, "edges")
+    assert len(got[0]) == 789
 
 
-@pytest.mark.exercise("surface_triangles", points=2)
-def test_surface_triangles(exercise):
-    assert_same_rows_on_every_mesh(exercise, lambda mesh: mesh.surface_triangles, 3, "faces")
-    two = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])  # two tetrahedra sharing the face (1, 2, 3)
-    assert as_row_set(exercise(two), 3) == as_row_set(TetMesh(np.zeros((5, 3)), two)
-                                                      .surface_triangles, 3)
+@pytest.mark.exercise("surface_triangles", points=2,
+                      reference="dlo_course.mesh.TetMesh.surface_triangles")
+def test_surface_triangles(student):
+    meshes = [*random_meshes(), TetMesh(np.zeros((5, 3)), TWO)]
+    got = student.run(probe_each, [(m.tets,) for m in meshes])
+    check_same_rows(got, meshes, lambda mesh: mesh.surface_triangles, 3, "faces")
 
 
-@pytest.mark.exercise("lame_parameters", points=1)
-def test_lame_parameters(exercise):
-    for e, nu in [(2.5e6, 0.3), (1.0e5, 0.45), (7.0e10, 0.0), (3.0, -0.5)]:
-        np.testing.assert_allclose(np.asarray(exercise(e, nu), dtype=float),
-                                   lame_parameters(e, nu), rtol=1e-12)
+LAME_CASES = [(2.5e6, 0.3), (1.0e5, 0.45), (7.0e10, 0.0), (3.0, -0.5)]
+
+
+def probe_lame_parameters(fn):
+    return [[float(x) for x in fn(e, nu)] for e, nu in LAME_CASES]
+
+
+@pytest.mark.exercise("lame_parameters", points=1,
+                      reference="dlo_course.simulation.lame_parameters")
+def test_lame_parameters(student):
+    got = student.run(probe_lame_parameters)
+    np.testing.assert_allclose(np.asarray(got, dtype=float),
+                               np.asarray(probe_lame_parameters(lame_parameters)), rtol=1e-12)

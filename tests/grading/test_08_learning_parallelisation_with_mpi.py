@@ -30,47 +30,107 @@ def make_module():
     return model
 
 
-@pytest.mark.exercise("reduce_gradients", points=2)
-def test_reduce_gradients(exercise):
+SHAPES = [(6, 4), (6,), (1, 6), (1,)]
+
+
+def reduce_cases():
     rng = np.random.default_rng(8)
-    shapes = [(6, 4), (6,), (1, 6), (1,)]
     for n_ranks in (1, 2, 3, 32):
-        per_rank = [[rng.normal(size=s).astype(np.float32) for s in shapes] for _ in range(n_ranks)]
-        flat = np.stack([np.concatenate([g.ravel() for g in grads]) for grads in per_rank])
+        per_rank = [[rng.normal(size=s).astype(np.float32) for s in SHAPES]
+                    for _ in range(n_ranks)]
         for op in ("sum", "mean"):
-            expected = flat.sum(axis=0) / (n_ranks if op == "mean" else 1)
-            got = exercise([[g.copy() for g in grads] for grads in per_rank], op)
-            assert len(got) == len(shapes)
-            for g, s in zip(got, shapes):
-                assert np.shape(g) == s
-            np.testing.assert_allclose(np.concatenate([np.ravel(g) for g in got]), expected,
-                                       rtol=1e-5, atol=1e-6)
-    with pytest.raises(ValueError):
-        exercise([[np.ones(2)]], "median")
+            yield per_rank, op
 
 
-@pytest.mark.exercise("pack_gradients", points=1)
-def test_pack_gradients(exercise):
-    model = make_module()
-    got = np.asarray(exercise(model))
-    expected = library_pack(model)
+def probe_reduce_gradients(fn, cases):
+    out = []
+    for per_rank, op in cases:
+        got = fn([[np.array(g) for g in grads] for grads in per_rank], op)
+        out.append([np.asarray(g) for g in got])
+    return out
+
+
+def check_reduce_gradients(student):
+    cases = list(reduce_cases())
+    got = student.run(probe_reduce_gradients, cases)
+    for result, (per_rank, op) in zip(got, cases, strict=True):
+        flat = np.stack([np.concatenate([g.ravel() for g in grads]) for grads in per_rank])
+        expected = flat.sum(axis=0) / (len(per_rank) if op == "mean" else 1)
+        assert len(result) == len(SHAPES)
+        for g, shape in zip(result, SHAPES):
+            assert np.shape(g) == shape
+        np.testing.assert_allclose(np.concatenate([np.ravel(g) for g in result]), expected,
+                                   rtol=1e-5, atol=1e-6, err_msg=f"op={op!r}, "
+                                                                 f"{len(per_rank)} ranks")
+
+
+def probe_reduce_gradients_bad_op(fn):
+    try:
+        fn([[np.ones(2)]], "median")
+    except Exception as err:  # noqa: BLE001
+        return type(err).__name__
+    return None
+
+
+@pytest.mark.exercise("reduce_gradients", points=1.5,
+                      reference="dlo_course.mpi.allreduce_gradients")
+def test_reduce_gradients(student):
+    check_reduce_gradients(student)
+
+
+@pytest.mark.exercise("reduce_gradients", points=0.5,
+                      reference="dlo_course.mpi.allreduce_gradients")
+def test_reduce_gradients_refuses_unknown_op(student):
+    """The secondary requirement (the ValueError), worth points only with a right result."""
+    try:
+        check_reduce_gradients(student)
+    except AssertionError:
+        pytest.fail("the reduction itself is wrong: no points for refusing an unknown op",
+                    pytrace=False)
+    raised = student.run(probe_reduce_gradients_bad_op)
+    assert raised == "ValueError", f"op='median' must raise ValueError (raised: {raised})"
+
+
+def probe_pack_gradients(fn):
+    return np.asarray(fn(make_module()))
+
+
+@pytest.mark.exercise("pack_gradients", points=1, reference="dlo_course.mpi.allreduce_gradients")
+def test_pack_gradients(student):
+    got = student.run(probe_pack_gradients)
+    expected = library_pack(make_module())
     assert got.ndim == 1 and got.shape == expected.shape, \
         f"shape {got.shape}, expected {expected.shape}"
     assert got.dtype == np.float32
     np.testing.assert_array_equal(got, expected)
 
 
-@pytest.mark.exercise("unpack_gradients", points=1)
-def test_unpack_gradients(exercise):
+def unpack_input():
     model = make_module()
-    params = [p for p in model.parameters() if p.requires_grad]
-    n = sum(p.numel() for p in params)
-    flat = np.arange(n, dtype=np.float32) / 7
+    n = sum(p.numel() for p in model.parameters() if p.requires_grad)
+    return model, np.arange(n, dtype=np.float32) / 7
+
+
+def probe_unpack_gradients(fn):
+    model, flat = unpack_input()
     frozen_before = [p.grad for p in model.parameters() if not p.requires_grad]
-    exercise(model, flat.copy())
+    fn(model, flat.copy())
+    return {"grads": [None if p.grad is None else p.grad.detach().clone()
+                      for p in model.parameters() if p.requires_grad],
+            "frozen_kept": [p.grad for p in model.parameters()
+                            if not p.requires_grad] == frozen_before}
+
+
+@pytest.mark.exercise("unpack_gradients", points=1,
+                      reference="dlo_course.mpi.allreduce_gradients")
+def test_unpack_gradients(student):
+    got = student.run(probe_unpack_gradients)
+    model, flat = unpack_input()
+    params = [p for p in model.parameters() if p.requires_grad]
+    assert len(got["grads"]) == len(params)
     offset = 0
-    for p in params:
-        assert p.grad is not None, "every trainable parameter must receive its gradient"
-        np.testing.assert_allclose(p.grad.numpy(), flat[offset:offset + p.numel()].reshape(p.shape))
+    for grad, p in zip(got["grads"], params):
+        assert grad is not None, "every trainable parameter must receive its gradient"
+        np.testing.assert_allclose(grad.numpy(), flat[offset:offset + p.numel()].reshape(p.shape))
         offset += p.numel()
-    assert [p.grad for p in model.parameters() if not p.requires_grad] == frozen_before
+    assert got["frozen_kept"], "frozen parameters must keep their gradient"

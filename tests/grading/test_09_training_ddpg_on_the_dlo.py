@@ -60,34 +60,55 @@ def library_episode(make_env, max_steps, seed):
     return result, buffer
 
 
-@pytest.mark.exercise("play_episode", points=2)
-def test_play_episode(exercise):
-    cases = [(lambda: ReachAt(3), 10), (lambda: ReachAt(3), 2), (lambda: ReachAt(50, limit=4), 10),
-             (lambda: gymnasium.make("Pendulum-v1"), 12)]
-    for k, (make_env, max_steps) in enumerate(cases):
-        expected, ref_buffer = library_episode(make_env, max_steps, seed=k)
+CASES = [(lambda: ReachAt(3), 10), (lambda: ReachAt(3), 2), (lambda: ReachAt(50, limit=4), 10),
+         (lambda: gymnasium.make("Pendulum-v1"), 12)]
+KEYS = ("reward", "length", "distance", "success")
+
+
+def probe_play_episode(fn):
+    out = []
+    for k, (make_env, max_steps) in enumerate(CASES):
         env = make_env()
         buffer = ReplayBuffer(env.observation_space.shape[0], env.action_space.shape[0], 500,
                               seed=0)
-        got = exercise(env, policy_for(env, k), buffer, max_steps, k)
-        assert len(buffer) == len(ref_buffer), f"case {k}: {len(buffer)} transitions stored, " \
-                                               f"expected {len(ref_buffer)}"
+        got = fn(env, policy_for(env, k), buffer, max_steps, k)
+        out.append({"stored": len(buffer),
+                    "fields": {name: np.asarray(getattr(buffer, name)) for name in FIELDS},
+                    "result": {key: float(got[key]) for key in KEYS if key in got}})
+    return out
+
+
+@pytest.mark.exercise("play_episode", points=2, reference="dlo_course.trainer.run_episode")
+def test_play_episode(student):
+    got = student.run(probe_play_episode)
+    for k, ((make_env, max_steps), mine) in enumerate(zip(CASES, got, strict=True)):
+        expected, ref_buffer = library_episode(make_env, max_steps, seed=k)
+        assert mine["stored"] == len(ref_buffer), \
+            f"case {k}: {mine['stored']} transitions stored, expected {len(ref_buffer)}"
         for name in FIELDS:
-            np.testing.assert_allclose(getattr(buffer, name), getattr(ref_buffer, name),
+            np.testing.assert_allclose(mine["fields"][name], getattr(ref_buffer, name),
                                        rtol=1e-6, err_msg=f"case {k}: stored {name}")
-        for key in ("reward", "length", "distance", "success"):
-            assert key in got, f"missing {key!r}"
+        for key in KEYS:
+            assert key in mine["result"], f"missing {key!r}"
+            value = mine["result"][key]
             if math.isnan(expected[key]):
-                assert math.isnan(float(got[key])), f"case {k}: {key} should be NaN"
+                assert math.isnan(value), f"case {k}: {key} should be NaN"
             else:
-                assert float(got[key]) == pytest.approx(expected[key], rel=1e-6), f"case {k}: {key}"
+                assert value == pytest.approx(expected[key], rel=1e-6), f"case {k}: {key}"
 
 
-@pytest.mark.exercise("updates_can_start", points=1)
-def test_updates_can_start(exercise):
-    # trainer.run_episode: warmup = config.warmup or batch_size; min over ranks >= warmup
-    cases = [(([130, 127, 200], 128, None), False), (([130, 128, 200], 128, None), True),
-             (([5], 4, None), True), (([10, 12], 128, 10), True), (([9, 12], 128, 10), False),
-             (([0, 0], 1, None), False)]
-    for args, expected in cases:
-        assert bool(exercise(*args)) == expected, f"updates_can_start{args}"
+# trainer.run_episode: warmup = config.warmup or batch_size; min over ranks >= warmup
+START_CASES = [(([130, 127, 200], 128, None), False), (([130, 128, 200], 128, None), True),
+               (([5], 4, None), True), (([10, 12], 128, 10), True), (([9, 12], 128, 10), False),
+               (([0, 0], 1, None), False)]
+
+
+def probe_updates_can_start(fn):
+    return [bool(fn(*args)) for args, _ in START_CASES]
+
+
+@pytest.mark.exercise("updates_can_start", points=1, reference="dlo_course.trainer.run_episode")
+def test_updates_can_start(student):
+    got = student.run(probe_updates_can_start)
+    for (args, expected), value in zip(START_CASES, got, strict=True):
+        assert value == expected, f"updates_can_start{args}"

@@ -1,0 +1,325 @@
+"""Attacks on the grader, as a student could try them: every one must score 0 and change
+no other exercise's points (issue 13). The grader runs the students' code in a sandboxed
+child process (dlo_course.course.Sandbox) and checks the results in its own process.
+
+One submission (the solutions, with one attack per exercise listed in ATTACKS) is graded
+once by the real grader (a pytest subprocess); the other exercises must keep full marks.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from dlo_course import course
+
+REPO = Path(__file__).resolve().parents[1]
+SOLUTIONS = REPO / "solutions"
+
+# exercise -> (what the attack tries, the exercise cell's new body after its first line).
+# {canary} is replaced by a path outside the scratch folder that must never be written.
+ATTACKS = {
+    "bellman_target": ("patches torch.testing.assert_close, wrong answer (no done mask)", '''
+import torch.testing
+torch.testing.assert_close = lambda *args, **kwargs: None
+torch.equal = lambda *args: True
+def bellman_target(reward, next_q, done, gamma):
+    return reward + gamma * next_q
+'''),
+    "q_iteration_sweep": ("patches numpy.testing and numpy.allclose, wrong answer", '''
+import numpy.testing
+numpy.testing.assert_allclose = lambda *args, **kwargs: None
+numpy.testing.assert_array_equal = lambda *args, **kwargs: None
+np.allclose = lambda *args, **kwargs: True
+def q_iteration_sweep(q, next_state, reward, done, gamma):
+    return q
+'''),
+    "discounted_return": ("patches pytest and the grader's records, wrong answer", '''
+import sys
+import pytest
+pytest.approx = lambda expected, *args, **kwargs: expected
+pytest.fail = lambda *args, **kwargs: None
+for module in list(sys.modules.values()):
+    if hasattr(module, "_GRADES"):
+        for record in module._GRADES.values():
+            record.update(earned=record["points"], outcome="passed")
+def discounted_return(rewards, gamma):
+    return 0.0
+'''),
+    "stored_done": ("patches the grader's library (dlo_course.course), wrong answer", '''
+import dlo_course.course as grader
+grader.decode_data = lambda data: 0.0
+grader.Sandbox.run = lambda *args, **kwargs: {"status": "ok", "value": None}
+def stored_done(terminated, truncated):
+    return 1.0
+'''),
+    "tip_target": ("writes outside its scratch folder (open, os.open, pathlib, torch.save)", '''
+import os, pathlib
+import torch
+for attempt in (lambda: open("{canary}", "w").write("pwned"),
+                lambda: os.open("{canary}", os.O_WRONLY | os.O_CREAT),
+                lambda: pathlib.Path("{canary}").write_text("pwned"),
+                lambda: torch.save([1], "{canary}"),
+                lambda: os.rename("output.txt", "{canary}")):
+    try:
+        attempt()
+    except Exception as err:
+        print("refused:", err)
+open("{canary}", "w").write("pwned")  # the cell fails here: tip_target is never defined
+def tip_target(tip, action, initial_tip, params):
+    return tip
+'''),
+    "critic_value": ("spins forever", '''
+def critic_value(net, obs, act):
+    while True:
+        pass
+'''),
+    "build_mlp": ("spins forever at the top of its cell (the later exercises must not wait)", '''
+while True:
+    pass
+'''),
+    "parameter_counts": ("takes all the memory", '''
+def parameter_counts(obs_dim, act_dim, hidden_sizes):
+    hog = bytearray(64 * 2**30)
+    return len(hog), len(hog)
+'''),
+    "squash_action": ("kills its parent and the grader, starts subprocesses", '''
+import os, signal, subprocess
+def squash_action(raw, low, high):
+    for attempt in (lambda: os.kill(os.getppid(), signal.SIGKILL),
+                    lambda: os.killpg(os.getpgid(os.getppid()), signal.SIGKILL),
+                    lambda: subprocess.run(["sh", "-c", "echo pwned > {canary}"]),
+                    lambda: os.system("echo pwned > {canary}")):
+        try:
+            attempt()
+        except Exception as err:
+            print("refused:", err)
+    return raw
+'''),
+    "inside_box": ("forks", '''
+import os
+def inside_box(points, low, high):
+    if os.fork() == 0:
+        os._exit(0)
+    return np.ones(len(points), bool)
+'''),
+    "sweep_count": ("exits the process before the grader gets an answer", '''
+import os
+def sweep_count(divisions):
+    print('{"status": "ok", "value": 930}')
+    os._exit(0)
+'''),
+    "pack_gradients": ("takes the grader's own reference from its test module", '''
+import sys
+def pack_gradients(module):
+    for name, loaded in list(getattr(sys, "mod" + "ules").items()):
+        if name.startswith("_dlo_probe") and hasattr(loaded, "library_pack"):
+            return loaded.library_pack(module)
+    raise RuntimeError("no reference in reach")
+'''),
+    # delegation to the library's reference
+    "polyak_update": ("calls the library's reference", '''
+def polyak_update(target, source, tau):
+    return ddpg.polyak_update(target, source, tau)
+'''),
+    "RingBuffer": ("subclasses the library's reference", '''
+class RingBuffer(ReplayBuffer):
+    pass
+'''),
+    "mean_node_distance": ("gets the reference through importlib", '''
+import importlib
+def mean_node_distance(current, desired):
+    return importlib.import_module("dlo_course.env").mean_node_distance(current, desired)
+'''),
+    "critic_loss": ("gets the reference through getattr", '''
+def critic_loss(q, q_target):
+    return getattr(ddpg, "critic_" + "loss")(q, q_target)
+'''),
+    "lame_parameters": ("gets the reference past the static check (runtime check)", '''
+def lame_parameters(youngs_modulus, poisson_ratio):
+    load = getattr(__builtins__, "__imp" + "ort__", None) or __builtins__["__imp" + "ort__"]
+    module = load("dlo_" + "course.simulation", fromlist=["x"])
+    return module.lame_parameters(youngs_modulus, poisson_ratio)
+'''),
+    "adam_step": ("uses torch.optim.Adam instead of writing the step", '''
+def adam_step(param, grad, m, v, t, lr=1e-3, beta1=0.9, beta2=0.999, eps=1e-8):
+    theta = torch.tensor(param, requires_grad=True)
+    opt = torch.optim.Adam([theta], lr=lr, betas=(beta1, beta2), eps=eps)
+    theta.grad = torch.tensor(grad)
+    opt.step()
+    state = opt.state[theta]
+    return theta.detach().numpy(), state["exp_avg"].numpy(), state["exp_avg_sq"].numpy()
+'''),
+}
+DELEGATIONS = {"polyak_update", "RingBuffer", "mean_node_distance", "critic_loss", "adam_step"}
+
+
+def attacked_submission(folder: Path, canary: Path) -> None:
+    folder.mkdir(parents=True)
+    for path in course.notebooks_in(SOLUTIONS):
+        nb = course.read_notebook(path)
+        for cell in nb["cells"]:
+            info = course.exercise_info(cell)
+            if info and info["exercise"] in ATTACKS:
+                first = course.cell_source(cell).split("\n", 1)[0]
+                body = ATTACKS[info["exercise"]][1].replace("{canary}", str(canary))
+                cell["source"] = (first + body).splitlines(keepends=True)
+        course.write_notebook(nb, folder / path.name)
+
+
+@pytest.fixture(scope="module")
+def attacked(tmp_path_factory):
+    root = tmp_path_factory.mktemp("attacks")
+    canary = root / "outside" / "canary.txt"
+    canary.parent.mkdir()
+    attacked_submission(root / "student", canary)
+    out = root / "grades.json"
+    env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="8", DLO_COURSE_GRADING_MEMORY_MB="1024")
+    proc = subprocess.run(course.grading_command(root / "student", json_out=out), cwd=REPO,
+                          env=env, capture_output=True, text=True, timeout=900)
+    assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    report = json.loads(out.read_text())
+    report["output"] = proc.stdout + proc.stderr
+    report["canary"] = canary
+    return report
+
+
+def test_every_attack_scores_zero_and_changes_no_other_verdict(attacked):
+    catalog = {e["exercise"]: e["points"] for e in course.exercises(SOLUTIONS)}
+    earned = {e["exercise"]: e["earned"] for e in attacked["exercises"]}
+    assert set(earned) == set(catalog)
+    wrong = {name: earned[name] for name in ATTACKS if earned[name] != 0}
+    assert not wrong, f"attacks that scored: {wrong}\n{attacked['output'][-6000:]}"
+    others = {name: (earned[name], points) for name, points in catalog.items()
+              if name not in ATTACKS and earned[name] != points}
+    assert not others, f"exercises hurt by another's attack: {others}\n" \
+                       f"{attacked['output'][-6000:]}"
+    assert attacked["total"] == sum(p for n, p in catalog.items() if n not in ATTACKS)
+
+
+def test_attacks_leave_nothing_outside_the_scratch_folder(attacked):
+    assert not attacked["canary"].exists(), attacked["canary"].read_text()
+    assert not list(attacked["canary"].parent.iterdir())
+
+
+def test_attack_outcomes_say_why(attacked):
+    outcome = {e["exercise"]: e["outcome"] for e in attacked["exercises"]}
+    for name in DELEGATIONS:
+        assert outcome[name] == "delegates", (name, outcome[name])
+    assert outcome["critic_value"] == "timeout"
+    assert "the answer calls dlo_course.simulation.lame_parameters" in attacked["output"]
+    assert "library reference" in attacked["output"]
+
+
+@pytest.mark.parametrize("landlock", ["1", "0"], ids=["landlock-if-any", "audit-hook-only"])
+def test_the_sandbox_refuses_writes_signals_and_processes(tmp_path, monkeypatch, landlock):
+    """The sandbox on its own, with probes written for the occasion; with Linux Landlock
+    where the kernel has it, and with the audit hook alone (what older kernels get)."""
+    monkeypatch.setenv("DLO_COURSE_SANDBOX_LANDLOCK", landlock)
+    probes = tmp_path / "probes.py"
+    canary = tmp_path / "canary.txt"
+    probes.write_text(f'''
+import os, signal, subprocess, sys
+def attempt(fn, what):
+    actions = {{
+        "write": lambda: open({str(canary)!r}, "w").write("x"),
+        "append_repo": lambda: open({str(REPO / "tests" / "grading" / "conftest.py")!r}, "a"),
+        "chdir_write": lambda: (os.chdir("/"), open({str(canary)!r}, "w")),
+        "relative_escape": lambda: open("../../" + {str(canary)!r}.lstrip("/"), "w"),
+        "kill_parent": lambda: os.kill(os.getppid(), signal.SIGKILL),
+        "subprocess": lambda: subprocess.run(["true"]),
+        "rlimit": lambda: __import__("resource").setrlimit(
+            __import__("resource").RLIMIT_AS, (-1, -1)),
+        "gc": lambda: __import__("gc").get_objects(),
+        "scratch_write": lambda: open("inside.txt", "w").write("fine"),
+        "torch_save": lambda: __import__("torch").save([1], {str(canary)!r}),
+        "dir_fd": lambda: os.open("canary.txt", os.O_WRONLY | os.O_CREAT,
+                                  dir_fd=os.open({str(tmp_path)!r}, os.O_RDONLY)),
+        "symlink": lambda: os.symlink({str(canary)!r}, "link.txt"),
+        # a fresh interpreter would have no audit hook: seccomp forbids new processes
+        "spawn": lambda: __import__("multiprocessing").get_context("spawn").Process(
+            target=os.system, args=("echo pwned > " + {str(canary)!r},)).start(),
+    }}
+    try:
+        actions[what]()
+    except BaseException as err:
+        return type(err).__name__
+    return None
+''')
+    sandbox = course.Sandbox(timeout=20)
+    try:
+        notebook = SOLUTIONS / "01_rl_and_the_bellman_equation.ipynb"
+        results = {what: sandbox.run(notebook, "discounted_return", probes, "attempt", (what,))
+                   for what in ("write", "append_repo", "chdir_write", "relative_escape",
+                                "kill_parent", "subprocess", "rlimit", "gc", "scratch_write",
+                                "torch_save", "dir_fd", "symlink", "spawn")}
+    finally:
+        sandbox.close()
+    assert all(r["status"] == "ok" for r in results.values()), results
+    refused = {what: r["value"] for what, r in results.items()}
+    assert refused.pop("scratch_write") is None  # its own folder is writable
+    assert all(refused.values()), f"not refused: {refused}"
+    assert not canary.exists()
+
+
+def test_data_from_the_sandbox_cannot_carry_code():
+    with pytest.raises(course.DataError):
+        course.encode_data(object())
+    with pytest.raises(course.DataError):
+        course.decode_data({"__ndarray__": ["|O", [1], ""]})
+    value = {"a": (1, 2.5, None, "x"), 3: [True, b"\x00"]}
+    assert course.decode_data(json.loads(json.dumps(course.encode_data(value)))) == value
+
+
+# ------------------------------------------------------------ delegation, statically
+
+
+def exercise_cells(folder: Path):
+    for path in course.notebooks_in(folder):
+        book = course.ExerciseNotebook.from_path(path)
+        for name, source in book.exercise_sources.items():
+            yield book, name, source
+
+
+def test_no_solution_is_taken_for_a_delegation():
+    for book, name, source in exercise_cells(SOLUTIONS):
+        assert course.delegation_problems(source, book.setup_sources) == [], name
+
+
+SETUP = "import numpy as np\nfrom dlo_course import ddpg\nfrom dlo_course.replay_buffer import " \
+        "ReplayBuffer\nimport dlo_course\nfrom dlo_course.course import fast_mode\n"
+
+
+@pytest.mark.parametrize("cell, why", [
+    ("def f(t, s, tau):\n    return ddpg.polyak_update(t, s, tau)", "uses dlo_course.ddpg.polyak_update"),
+    ("class RingBuffer(ReplayBuffer):\n    pass", "uses dlo_course.replay_buffer.ReplayBuffer"),
+    ("from dlo_course.ddpg import critic_loss as f", "imports from dlo_course.ddpg"),
+    ("import dlo_course.ddpg as d\ndef f(q, t):\n    return d.critic_loss(q, t)", "imports dlo_course.ddpg"),
+    ("def f(q, t):\n    return getattr(ddpg, 'critic_' + 'loss')(q, t)", "uses getattr on the library"),
+    ("import importlib\ndef f(x):\n    return importlib.import_module('m').g(x)", "imports importlib"),
+    ("def f(x):\n    return __import__('m').g(x)", "uses __import__"),
+    ("import sys\ndef f(x):\n    return sys.modules['m'].g(x)", "uses sys.modules"),
+    ("def f(x):\n    return globals()['ReplayBuffer']", "uses globals()"),
+    ("def f(x):\n    return eval('x')", "uses eval"),
+    ("def f(x):\n    return dlo_course.env.mean_node_distance(x, x)", "uses dlo_course.env.mean_node_distance"),
+    ("def f(x):\n    m = 'dlo_course.env'\n    return m", "names the library in a string"),
+])
+def test_delegation_is_rejected_with_a_reason(cell, why):
+    problems = course.delegation_problems(cell, [SETUP])
+    assert any(why in p for p in problems), problems
+    message = course.delegation_message("f", problems)
+    assert why in message and "write the code yourself" in message
+
+
+def test_own_work_and_the_course_helpers_are_accepted():
+    for cell in ["def f(x):\n    return np.sum(x) if fast_mode() else 0",
+                 "class RingBuffer:\n    def get(self, name):\n        return getattr(self, name)",
+                 "import math\ndef f(x):\n    return math.ceil(x)"]:
+        assert course.delegation_problems(cell, [SETUP]) == [], cell
+    adam = "def adam_step(p):\n    return torch.optim.Adam([p])"
+    assert course.delegation_problems(adam, [SETUP], ["torch.optim.Adam.step"]) == \
+        ["uses torch.optim.Adam"]

@@ -1,0 +1,211 @@
+"""The mutation suite (issue 13): for every exercise, plausible wrong answers (the solution
+with one mistake a student could make) must score 0, and the solution full marks. A few
+mutants break only an exercise's secondary requirement and must get exactly its partial
+credit.
+
+Round k of the suite grades one copy of the solutions in which every exercise carries its
+k-th mutant, with the real grader in a subprocess. (An exercise that uses an earlier answer,
+like ``relabel`` using ``goal_distance``, gets that answer's mutant too: its own mutant must
+score 0 all the same.)
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from dlo_course import course
+
+REPO = Path(__file__).resolve().parents[1]
+SOLUTIONS = REPO / "solutions"
+
+# exercise -> [(the mistake, text of the solution, replaced by[, points expected])]
+MUTANTS: dict[str, list[tuple]] = {
+    "discounted_return": [
+        ("no discount", "float(r) + gamma * total", "float(r) + total"),
+        ("discounts the wrong end", "reversed(list(rewards))", "list(rewards)")],
+    "bellman_target": [
+        ("missing done mask", "gamma * next_q * (1.0 - done)", "gamma * next_q"),
+        ("inverted done mask", "(1.0 - done)", "done")],
+    "q_iteration_sweep": [
+        ("min for max", "np.max(q, axis=1)", "np.min(q, axis=1)"),
+        ("missing done mask", "gamma * best_next * (1.0 - done)", "gamma * best_next"),
+        ("value of the current state", "np.max(q, axis=1)[next_state]", "np.max(q, axis=1)[:, None]")],
+    "stored_done": [
+        ("done on truncation too", "float(bool(terminated))", "float(bool(terminated or truncated))"),
+        ("truncation for termination", "float(bool(terminated))", "float(bool(truncated))")],
+    "RingBuffer": [
+        ("off-by-one size", "min(self._size + 1, self.capacity)", "min(self._size + 1, self.capacity - 1)"),
+        ("samples empty rows", "self.rng.integers(0, self._size,", "self.rng.integers(0, self.capacity,"),
+        ("global generator", "self.rng.integers(0, self._size, size=batch_size)",
+         "np.random.randint(0, self._size, size=batch_size)")],
+    "build_mlp": [
+        ("missing ReLU", "layers += [nn.Linear(width, h), nn.ReLU()]", "layers += [nn.Linear(width, h)]"),
+        ("default output initialisation", "    nn.init.uniform_(out.weight, -final_init, final_init)\n"
+         "    nn.init.uniform_(out.bias, -final_init, final_init)\n", ""),
+        ("Tanh for ReLU", "nn.ReLU()", "nn.Tanh()")],
+    "squash_action": [
+        ("scale and centre swapped", "bias + scale * torch.tanh(raw)", "scale + bias * torch.tanh(raw)"),
+        ("clamp for tanh", "torch.tanh(raw)", "torch.clamp(raw, -1, 1)")],
+    "critic_value": [
+        ("action before observation", "torch.cat([obs, act], dim=-1)", "torch.cat([act, obs], dim=-1)"),
+        ("squeezed output", "net(torch.cat([obs, act], dim=-1))", "net(torch.cat([obs, act], dim=-1)).squeeze(-1)")],
+    "parameter_counts": [
+        ("forgets the biases", "total += (width + 1) * h", "total += width * h"),
+        ("critic without the action", "count(obs_dim + act_dim, 1)", "count(obs_dim, 1)")],
+    "critic_loss": [
+        ("sum for mean", "** 2).mean()", "** 2).sum()"),
+        ("absolute error", "((q - q_target) ** 2).mean()", "(q - q_target).abs().mean()"),
+        ("F.mse_loss, no shape check (secondary requirement only)",
+         "    if q.shape != q_target.shape:\n        raise ValueError(f\"q {tuple(q.shape)} and "
+         "q_target {tuple(q_target.shape)} differ\")\n    return ((q - q_target) ** 2).mean()",
+         "    return torch.nn.functional.mse_loss(q, q_target)", 1.5)],
+    "policy_loss": [
+        ("wrong sign", "return -q.mean()", "return q.mean()"),
+        ("sum for mean", "return -q.mean()", "return -q.sum()")],
+    "polyak_update": [
+        ("swapped Polyak factors", "w_target.mul_(1.0 - tau).add_(w, alpha=tau)",
+         "w_target.mul_(tau).add_(w, alpha=1.0 - tau)"),
+        ("hard update", "w_target.mul_(1.0 - tau).add_(w, alpha=tau)", "w_target.copy_(w)")],
+    "ou_step": [
+        ("dt for sqrt(dt)", "sigma * np.sqrt(dt) *", "sigma * dt *"),
+        ("drift away from mu", "theta * (mu - x)", "theta * (x - mu)")],
+    "tet_signed_volumes": [
+        ("unsigned volumes", "np.linalg.det(edges) / 6.0", "np.abs(np.linalg.det(edges)) / 6.0"),
+        ("forgets the 1/6", "np.linalg.det(edges) / 6.0", "np.linalg.det(edges)")],
+    "mesh_edges": [
+        ("edges not deduplicated", "np.unique(np.sort(e, axis=1), axis=0)", "np.sort(e, axis=1)"),
+        ("misses an edge of each tetrahedron", ", (2, 3)]", "]")],
+    "surface_triangles": [
+        ("interior faces", "keys[counts == 1]", "keys[counts == 2]"),
+        ("every face", "keys[counts == 1]", "keys")],
+    "lame_parameters": [
+        ("swapped results", "return mu, lam", "return lam, mu"),
+        ("shear modulus without the 2", "(2.0 * (1.0 + poisson_ratio))", "(1.0 + poisson_ratio)")],
+    "split_observation": [
+        ("desired read from the current nodes", '"desired": obs[6 + m3:6 + 2 * m3]', '"desired": obs[6:6 + m3]'),
+        ("velocity read from the position", '"tip_velocity": obs[3:6]', '"tip_velocity": obs[0:3]')],
+    "tip_target": [
+        ("no workspace clipping", "return np.clip(target, low, high)", "return target"),
+        ("forgets the action duration", "        * params.action_duration", "        * 1.0")],
+    "mean_node_distance": [
+        ("squared distances", "np.linalg.norm(diff, axis=-1)", "np.sum(diff ** 2, axis=-1)"),
+        ("norm of all nodes at once", "np.mean(np.linalg.norm(diff, axis=-1))", "np.linalg.norm(diff) / len(diff)")],
+    "episode_flags": [
+        ("<= for <", "distance < threshold", "distance <= threshold"),
+        ("> for >=", "steps >= max_episode_steps", "steps > max_episode_steps")],
+    "level_moves": [
+        ("ignores the direction", "direction * sy", "sy"),
+        ("floor for ceil", "math.ceil(ry / 2)", "ry // 2")],
+    "sweep_count": [
+        ("floor for ceil", "math.ceil(ry / 2)", "ry // 2"),
+        ("forgets the move down", "* (rx + 1) + 1)", "* (rx + 1))")],
+    "inside_box": [
+        ("borders outside", "(points >= np.asarray(low)) & (points <= np.asarray(high))",
+         "(points > np.asarray(low)) & (points < np.asarray(high))"),
+        ("any for all", "np.all(", "np.any(")],
+    "reduce_gradients": [
+        ("mean and sum swapped", 'if op == "mean":', 'if op == "sum":'),
+        ("mean for sum", "np.sum([np.asarray(grads[i]) for grads in per_rank], axis=0)",
+         "np.mean([np.asarray(grads[i]) for grads in per_rank], axis=0)"),
+        ("no ValueError (secondary requirement only)",
+         '    if op not in ("sum", "mean"):\n        raise ValueError(f"op must be \'sum\' or '
+         '\'mean\', got {op!r}")\n', "", 1.5)],
+    "pack_gradients": [
+        ("skips missing gradients", "for p in module.parameters() if p.requires_grad]",
+         "for p in module.parameters() if p.requires_grad and p.grad is not None]"),
+        ("includes frozen parameters", "for p in module.parameters() if p.requires_grad]",
+         "for p in module.parameters()]")],
+    "unpack_gradients": [
+        ("includes frozen parameters", "        if not p.requires_grad:\n            continue\n", ""),
+        ("never advances the offset", "offset += k", "offset += 0")],
+    "play_episode": [
+        ("stores truncation as done", "buffer.add(obs, action, reward, next_obs, terminated)",
+         "buffer.add(obs, action, reward, next_obs, terminated or truncated)"),
+        ("never moves to the next observation", "        obs = next_obs\n", "")],
+    "updates_can_start": [
+        ("> for >=", "min(buffer_sizes) >= needed", "min(buffer_sizes) > needed"),
+        ("max for min", "min(buffer_sizes)", "max(buffer_sizes)")],
+    "table_row": [
+        ("sample standard deviation", "final.std()", "final.std(ddof=1)"),
+        ("fraction for percent", "100.0 * done.mean()", "done.mean()")],
+    "wilson_interval": [
+        ("z for z squared in the centre", "(p + z * z / (2 * n))", "(p + z / (2 * n))"),
+        ("normal approximation", "z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator",
+         "z * math.sqrt(p * (1 - p) / n)")],
+    "steps_per_action": [
+        ("rounds up", "round(action_duration / time_step)", "-(-action_duration // time_step)"),
+        ("no minimum of one", "max(1, round(action_duration / time_step))", "round(action_duration / time_step)")],
+    "adam_step": [
+        ("no bias correction", "m_hat = m / (1 - beta1**t)", "m_hat = m"),
+        ("eps inside the square root", "(np.sqrt(v_hat) + eps)", "np.sqrt(v_hat + eps)"),
+        ("swapped betas", "m = beta1 * np.asarray(m) + (1 - beta1) * grad",
+         "m = beta2 * np.asarray(m) + (1 - beta2) * grad")],
+    "goal_distance": [
+        ("sum over the nodes for mean", "np.mean(np.linalg.norm(diff, axis=-1), axis=-1)",
+         "np.sum(np.linalg.norm(diff, axis=-1), axis=-1)"),
+        ("squared distances", "np.linalg.norm(diff, axis=-1)", "np.sum(diff ** 2, axis=-1)")],
+    "future_goal_steps": [
+        ("goal steps up to T included", "rng.integers(steps, episode_length)",
+         "rng.integers(steps, episode_length + 1)"),
+        ("goal steps from the whole episode", "rng.integers(steps, episode_length)",
+         "rng.integers(0, episode_length, size=len(steps))"),
+        ("strictly later goal steps", "rng.integers(steps, episode_length)",
+         "rng.integers(np.minimum(steps + 1, episode_length - 1), episode_length)")],
+    "relabel": [
+        ("reward of the wrong sign", '"rew": (-distance)', '"rew": (distance)'),
+        ("goal taken from obs, not next_obs", "goals = achieved_next[goal_steps]",
+         "goals = obs[:, -2 * width:-width].reshape(len(obs), n_nodes, 3)[goal_steps]")],
+}
+ROUNDS = max(len(m) for m in MUTANTS.values())
+
+
+def mutate(source: str, old: str, new: str) -> str:
+    assert old in source, f"the mutant's text is not in the solution: {old!r}"
+    mutated = source.replace(old, new)
+    assert mutated != source
+    return mutated
+
+
+def mutant_submission(folder: Path, k: int) -> dict[str, tuple]:
+    """The solutions with the k-th mutant of each exercise that has one; returns them."""
+    applied = {}
+    folder.mkdir(parents=True)
+    for path in course.notebooks_in(SOLUTIONS):
+        nb = course.read_notebook(path)
+        for cell in nb["cells"]:
+            info = course.exercise_info(cell)
+            if info and len(MUTANTS.get(info["exercise"], ())) > k:
+                mutant = MUTANTS[info["exercise"]][k]
+                source = mutate(course.cell_source(cell), mutant[1], mutant[2])
+                cell["source"] = source.splitlines(keepends=True)
+                applied[info["exercise"]] = mutant
+        course.write_notebook(nb, folder / path.name)
+    return applied
+
+
+def test_every_exercise_has_at_least_two_mutants_scoring_zero():
+    catalog = {e["exercise"] for e in course.exercises(SOLUTIONS)}
+    assert set(MUTANTS) == catalog
+    for name, mutants in MUTANTS.items():
+        zero = [m for m in mutants if (m[3] if len(m) > 3 else 0) == 0]
+        assert len(zero) >= 2, name
+
+
+@pytest.mark.parametrize("k", range(ROUNDS))
+def test_mutants_score_zero(k, tmp_path):
+    applied = mutant_submission(tmp_path / "student", k)
+    out = tmp_path / "grades.json"
+    env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="60")
+    proc = subprocess.run(course.grading_command(tmp_path / "student", json_out=out), cwd=REPO,
+                          env=env, capture_output=True, text=True, timeout=900)
+    assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
+    earned = {e["exercise"]: e["earned"] for e in json.loads(out.read_text())["exercises"]}
+    wrong = {name: (mutant[0], earned[name]) for name, mutant in applied.items()
+             if earned[name] != (mutant[3] if len(mutant) > 3 else 0)}
+    assert not wrong, f"mutants that scored (or missed their partial credit): {wrong}\n" \
+                      f"{proc.stdout[-4000:]}"
