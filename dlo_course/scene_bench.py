@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from dlo_course.simulation import (
-    RodScene, SimParams, edge_spring_args, ensure_mesh, p, pybullet_data, quiet_c_stdout)
+    RodScene, SimParams, edge_spring_args, ensure_mesh, nullspace_ik_args, p, pybullet_data,
+    quiet_c_stdout)
 
 GRIPPER_LINKS = RodScene.GRIPPER_LINKS
 
@@ -140,16 +141,8 @@ class AuthorsScene:
 
         self.ik_args: dict = {}
         if sw.nullspace_ik:
-            lower, upper, ranges = [], [], []
-            for joint in range(p.getNumJoints(self.panda, physicsClientId=c)):
-                info = p.getJointInfo(self.panda, joint, physicsClientId=c)
-                if info[2] != p.JOINT_FIXED:
-                    lower.append(info[8])
-                    upper.append(info[9])
-                    ranges.append(info[9] - info[8])
-            rest = list(prm.initial_joints) + [0.0] * (len(lower) - 7)
-            self.ik_args = dict(lowerLimits=lower, upperLimits=upper, jointRanges=ranges,
-                                restPoses=rest, maxNumIterations=50, residualThreshold=1e-5)
+            self.ik_args = dict(nullspace_ik_args(self.panda, prm.initial_joints, c),
+                                maxNumIterations=50, residualThreshold=1e-5)
 
     def _set_time(self) -> None:
         p.setTimeStep(self.params.time_step, physicsClientId=self.client)

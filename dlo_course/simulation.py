@@ -300,18 +300,9 @@ class RodScene:
         # that contact made the simulation explode on the second move of the database sweep.
         p.setCollisionFilterPair(self.plane, self.rod, -1, -1, 0, physicsClientId=c)
 
-        lower, upper, ranges = [], [], []
-        for j in range(p.getNumJoints(self.panda, physicsClientId=c)):
-            info = p.getJointInfo(self.panda, j, physicsClientId=c)
-            if info[2] != p.JOINT_FIXED:
-                lower.append(info[8])
-                upper.append(info[9])
-                ranges.append(info[9] - info[8])
-        rest = list(prm.initial_joints) + [0.0] * (len(lower) - 7)
         # Null-space IK pulls the redundant arm towards its initial posture, so the same tip
         # path always gives the same arm motion instead of drifting through the null space.
-        self._ik_limits = dict(lowerLimits=lower, upperLimits=upper, jointRanges=ranges,
-                               restPoses=rest)
+        self._ik_limits = nullspace_ik_args(self.panda, prm.initial_joints, c)
         self.timings.reset()
 
     def close(self) -> None:
@@ -434,6 +425,20 @@ class RodScene:
         for points, colour in markers:
             _draw_crosses(image, _project(np.asarray(points), view, proj, width, height), colour)
         return image
+
+
+def nullspace_ik_args(robot: int, rest_joints, client: int) -> dict:
+    """Keyword arguments of ``calculateInverseKinematics`` for null-space IK: the limits and
+    ranges of every movable joint of ``robot``, and ``rest_joints`` (then 0) as rest poses."""
+    lower, upper, ranges = [], [], []
+    for joint in range(p.getNumJoints(robot, physicsClientId=client)):
+        info = p.getJointInfo(robot, joint, physicsClientId=client)
+        if info[2] != p.JOINT_FIXED:
+            lower.append(info[8])
+            upper.append(info[9])
+            ranges.append(info[9] - info[8])
+    rest = list(rest_joints) + [0.0] * (len(lower) - len(rest_joints))
+    return dict(lowerLimits=lower, upperLimits=upper, jointRanges=ranges, restPoses=rest)
 
 
 def _project(points: np.ndarray, view, proj, width: int, height: int) -> np.ndarray:
