@@ -348,12 +348,12 @@ def resolve_goals(source: str | Path | np.ndarray, n_nodes: int) -> np.ndarray:
     if path.suffix == ".npz" and path.is_file():
         try:
             with np.load(path, allow_pickle=False) as data:
-                if "goals" in data.files and "nodes" not in data.files:
-                    return goal_array(data["goals"], n_nodes)
-        except ValueError:
-            raise
+                goals = (data["goals"] if "goals" in data.files and "nodes" not in data.files
+                         else None)
         except Exception as err:  # a truncated zip raises one of many kinds
             raise ValueError(f"{path} is not a readable goal file: {err}") from err
+        if goals is not None:
+            return goal_array(goals, n_nodes)
     return load_database(source).goals(n_nodes)
 
 
