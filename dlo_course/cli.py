@@ -199,6 +199,12 @@ def bench_scene(actions: int, block: int, seed: int, switches: bool, knobs: bool
               help="Rebuild the world before every training episode (the paper's text), or "
                    "start each from the shape the last one ended in (the authors' code) "
                    "[preset; the paper: rebuild].")
+@click.option("--validate-every", type=click.IntRange(min=0), default=None,
+              help="Every this many episodes, test the actor on held-out goals (not the "
+                   "paper's test goals) and keep the best one in best_actor.pt (0: off) "
+                   "[preset; the paper: 0].")
+@click.option("--validation-goals", type=click.IntRange(min=1), default=None,
+              help="Number of those held-out goals [preset: 30].")
 @click.option("--progress/--no-progress", default=True, show_default=True,
               help="Progress bar (rank 0).")
 def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int | None,
@@ -207,7 +213,7 @@ def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int
           batch_size: int | None, updates_per_step: int | None, her_k: int | None,
           twin_critics: bool | None, policy_delay: int | None, target_noise: float | None,
           target_noise_clip: float | None, reset_between_episodes: bool | None,
-          progress: bool) -> None:
+          validate_every: int | None, validation_goals: int | None, progress: bool) -> None:
     """Train DDPG agents; run under `mpiexec -n N` for N parallel agents (the paper: 32)."""
     import dataclasses
 
@@ -223,7 +229,9 @@ def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int
         ("env_id", env_id), ("episodes", episodes), ("steps_per_episode", steps_per_episode),
         ("reduce", reduce), ("checkpoint_every", checkpoint_every),
         ("updates_per_step", updates_per_step), ("her_k", her_k),
-        ("reset_between_episodes", reset_between_episodes)] if value is not None}
+        ("reset_between_episodes", reset_between_episodes),
+        ("validate_every", validate_every), ("validation_goals", validation_goals)]
+        if value is not None}
     ddpg_overrides = {name: value for name, value in [
         ("batch_size", batch_size), ("twin_critics", twin_critics),
         ("policy_delay", policy_delay), ("target_noise", target_noise),
@@ -241,6 +249,25 @@ def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int
         raise click.ClickException(str(err)) from err
     if mpi.is_root():
         click.echo(f"trained {mpi.size()} agent(s); results in {run_dir}")
+
+
+@main.command()
+@click.argument("run_dir", type=click.Path(exists=True, file_okay=False, path_type=Path))
+@click.argument("dest", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--actor", type=click.Choice(["latest", "best"]), default="latest",
+              show_default=True,
+              help="Ship the run's last actor, or the one that did best on its validation "
+                   "goals (runs trained with --validate-every).")
+def ship(run_dir: Path, dest: Path, actor: str) -> None:
+    """Copy a training run's agent and record into DEST (e.g. data/checkpoints/nodes4),
+    without its replay buffers."""
+    from dlo_course.reproduce import ship_run
+
+    try:
+        ship_run(run_dir, dest, actor=actor)
+    except (ValueError, FileNotFoundError) as err:
+        raise click.ClickException(str(err)) from err
+    click.echo(f"shipped the {actor} actor of {run_dir} to {dest}")
 
 
 @main.command()

@@ -238,31 +238,59 @@ def _run_record(folder: Path) -> dict:
 SHIPPED_FILES = ("actor.pt", "critic.pt", "config.json", "progress.csv")
 
 
-def ship_run(run_dir: Path, dest: Path, **extra: Any) -> Path:
+def _keep_episodes(path: Path, episodes: int) -> None:
+    """Rewrite a per-episode CSV with only its rows up to ``episodes``."""
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        rows = [row for row in reader if int(row["episode"]) <= episodes]
+        fields = reader.fieldnames
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def ship_run(run_dir: Path, dest: Path, actor: str = "latest", **extra: Any) -> Path:
     """Copy a finished run's networks, configuration and learning curve into ``dest`` (e.g.
     ``data/checkpoints/nodes4``) without its bulky resume checkpoints (replay buffers), and
     write ``record.json``: what the training cost (:func:`training_record`) plus ``extra``
-    (e.g. ``commit=...`` for runs started before the trainer recorded it)."""
+    (e.g. ``commit=...`` for runs started before the trainer recorded it).
+
+    Args:
+        actor: "latest" ships the run's last actor; "best" the one that did best on the
+            validation goals (``best_actor.pt``, runs with ``validate_every`` > 0), recorded
+            as ``selected`` in ``record.json``. The cost recorded is the whole run's either way:
+            knowing which actor was best took the training after it too.
+    """
     run_dir, dest = Path(run_dir), Path(dest)
+    if actor not in ("latest", "best"):
+        raise ValueError(f"actor must be 'latest' or 'best', got {actor!r}")
     missing = [f for f in SHIPPED_FILES if not (run_dir / f).is_file()]
+    if actor == "best" and not (run_dir / "best_actor.pt").is_file():
+        missing.append("best_actor.pt (train with validate_every > 0)")
     if missing:
         raise FileNotFoundError(f"{run_dir} is not a finished run: missing {missing}")
     dest.mkdir(parents=True, exist_ok=True)
     for name in SHIPPED_FILES:
         shutil.copy2(run_dir / name, dest / name)
+    for name in ("validation.csv", "best.json"):
+        if (run_dir / name).is_file():
+            shutil.copy2(run_dir / name, dest / name)
+        elif (dest / name).exists():
+            (dest / name).unlink()  # left from a run shipped here before
+    if actor == "best":
+        shutil.copy2(run_dir / "best_actor.pt", dest / "actor.pt")
+        extra["selected"] = json.loads((run_dir / "best.json").read_text())
     # A run stopped between checkpoints: its networks are the last checkpoint's, so its
     # learning curve and record stop there too.
     latest = run_dir / "checkpoints" / "latest.json"
     if latest.is_file():
         done = int(json.loads(latest.read_text())["episodes_done"])
-        with open(dest / "progress.csv", newline="") as f:
-            reader = csv.DictReader(f)
-            rows = [row for row in reader if int(row["episode"]) <= done]
-            fields = reader.fieldnames
-        with open(dest / "progress.csv", "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=fields)
-            writer.writeheader()
-            writer.writerows(rows)
+        if actor == "best":  # a best actor found after the last checkpoint is still real
+            done = max(done, int(extra["selected"]["episode"]))
+        for name in ("progress.csv", "validation.csv"):
+            if (dest / name).is_file():
+                _keep_episodes(dest / name, done)
     record = {**_run_record(dest), **{k: v for k, v in extra.items() if v is not None}}
     (dest / "record.json").write_text(json.dumps(record, indent=2) + "\n")
     return dest

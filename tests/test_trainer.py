@@ -1,4 +1,5 @@
 import csv
+import dataclasses
 import json
 
 import gymnasium
@@ -11,9 +12,10 @@ from dlo_course.cli import main, train as train_command
 from dlo_course.ddpg import DDPG, DDPGConfig, load_network
 from dlo_course.learning_curves import read_progress
 from dlo_course.noise import OUNoise
+from dlo_course.reproduce import ship_run
 from dlo_course.replay_buffer import ReplayBuffer
 from dlo_course.trainer import (PRESETS, PROGRESS_COLUMNS, TrainConfig, load_config, make_env,
-                                preset, run_episode, train)
+                                preset, run_episode, train, validation_indices)
 
 
 # --- tiny test environments ---
@@ -289,6 +291,8 @@ def test_recipe_preset():
     assert (recipe.episodes, recipe.steps_per_episode, recipe.checkpoint_every,
             recipe.expected_agents, recipe.updates_per_step, recipe.her_k,
             recipe.reset_between_episodes, recipe.reduce) == (500, 60, 10, 2, 2, 4, False, "sum")
+    assert (recipe.validate_every, recipe.validation_goals, recipe.validation_steps) == (20, 30, 30)
+    assert PRESETS["paper"].validate_every == 0  # the paper kept its last actor
     d = recipe.ddpg
     assert (d.normalize_obs, d.preactivation_l2, d.noise_sigma, d.batch_size, d.buffer_size,
             d.twin_critics, d.policy_delay, d.target_noise, d.target_noise_clip) == \
@@ -435,15 +439,51 @@ def test_recipe_smoke_run_on_the_rod(tmp_path):
     """The recipe's levers together, on the real rod, in one process: 2 episodes of 6
     actions (a batch of 16 so that updates start), then a resume for one more episode."""
     config = preset("recipe", episodes=2, steps_per_episode=6, out_dir=str(tmp_path / "run"),
-                    checkpoint_every=1, expected_agents=None)
+                    checkpoint_every=1, expected_agents=None, validate_every=2,
+                    validation_goals=2, validation_steps=3)
     config.ddpg.batch_size = 16
+    run = tmp_path / "run"
     train(config, progress=False)
-    progress = read_progress(tmp_path / "run")
+    progress = read_progress(run)
     assert list(progress["episode"]) == [1, 2]
     assert progress["updates"][-1] > 0  # HER copies filled a batch within the first episode
-    saved = json.loads((tmp_path / "run" / "config.json").read_text())["config"]
+    saved = json.loads((run / "config.json").read_text())["config"]
     assert saved["her_k"] == 4 and saved["reset_between_episodes"] is False
     assert saved["ddpg"]["twin_critics"] is True
+    # One validation, after episode 2; the first one is always the best so far.
+    with open(run / "validation.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["episode"], r["best"]) for r in rows] == [("2", "1")]
+    best = json.loads((run / "best.json").read_text())
+    assert best["episode"] == 2 and best["done_rate"] == float(rows[0]["done_rate"])
+    assert 0 < best["distance_mean"] < 1
     config.episodes = 3
     train(config, resume=True, progress=False)
-    assert list(read_progress(tmp_path / "run")["episode"]) == [1, 2, 3]
+    assert list(read_progress(run)["episode"]) == [1, 2, 3]
+    with open(run / "validation.csv", newline="") as f:
+        assert [r["episode"] for r in csv.DictReader(f)] == ["2"]  # kept across the resume
+    shipped = ship_run(run, tmp_path / "shipped", actor="best")
+    record = json.loads((shipped / "record.json").read_text())
+    assert record["selected"]["episode"] == 2 and record["episodes_per_agent"] == 3
+    assert (shipped / "actor.pt").read_bytes() == (run / "best_actor.pt").read_bytes()
+
+
+def test_validation_goals_hold_out_the_papers_test_goals():
+    """Choosing the best actor must not peek at the test: the validation goals are training
+    goals that are not among the paper's test goals, drawn from the run's seed."""
+    from dlo_course.database import load_database
+    from dlo_course.env import DLOShapeEnv
+
+    env = DLOShapeEnv(n_nodes=4)  # not reset: no world is built
+    try:
+        config = preset("recipe")
+        picked = validation_indices(env, config)
+        assert len(picked) == 30 == len(np.unique(picked))
+        assert not np.isin(picked, load_database("small").test_indices(4)).any()
+        np.testing.assert_array_equal(picked, validation_indices(env, config))
+        other = validation_indices(env, dataclasses.replace(config, seed=1))
+        assert not np.array_equal(picked, other)
+        with pytest.raises(ValueError, match="validation_goals"):
+            validation_indices(env, dataclasses.replace(config, validation_goals=10_000))
+    finally:
+        env.close()
