@@ -220,6 +220,23 @@ def polyak_update(target: nn.Module, source: nn.Module, tau: float) -> None:
 # --- the networks ---
 
 
+@dataclass(frozen=True)
+class UpdateRules:
+    """The four formulas of a DDPG update, as functions the agent calls: the paper's by
+    default. Pass others to :class:`DDPG` (or to :func:`dlo_course.trainer.train`) to try a
+    variant, or to train with your own implementations, as lesson 04 does; nothing in the
+    library is patched, so the next agent gets the paper's formulas again."""
+
+    bellman_target: Callable[..., torch.Tensor] = bellman_target
+    """(reward, next_q, done, gamma) -> (B, 1) targets y = r + gamma (1 - done) Q'."""
+    critic_loss: Callable[[torch.Tensor, torch.Tensor], torch.Tensor] = critic_loss
+    """(q, q_target), both (B, 1) -> scalar loss."""
+    policy_loss: Callable[[torch.Tensor], torch.Tensor] = policy_loss
+    """(q,) (B, 1) values of the actor's actions -> scalar loss."""
+    polyak_update: Callable[[nn.Module, nn.Module, float], None] = polyak_update
+    """(target, source, tau): move the target's weights towards the source's, in place."""
+
+
 def mlp(in_dim: int, hidden_sizes: Sequence[int], out_dim: int, final_init: float) -> nn.Sequential:
     """Fully connected network: Linear-ReLU for each hidden layer, then a Linear output."""
     layers: list[nn.Module] = []
@@ -377,12 +394,15 @@ class DDPG:
         obs_offset, obs_scale: (obs_dim,) fixed input scaling of both networks, used only
             when ``config.normalize_obs`` is set (e.g. from
             :meth:`DLOShapeEnv.observation_reference`).
+        rules: the formulas :meth:`update` uses (:class:`UpdateRules`); the paper's by default.
     """
 
     def __init__(self, obs_dim: int, act_dim: int, action_low: Any = -1.0,
                  action_high: Any = 1.0, config: DDPGConfig | None = None,
-                 obs_offset: Any = None, obs_scale: Any = None) -> None:
+                 obs_offset: Any = None, obs_scale: Any = None,
+                 rules: UpdateRules | None = None) -> None:
         self.config = cfg = config or DDPGConfig()
+        self.rules = rules or UpdateRules()
         if cfg.normalize_obs and (obs_offset is None or obs_scale is None):
             raise ValueError("normalize_obs needs obs_offset and obs_scale")
         if not cfg.normalize_obs:
@@ -498,12 +518,13 @@ class DDPG:
 
         # 1-2. Critic: regress Q(s, a) on the Bellman target built from the target networks.
         with torch.no_grad():
-            q_target = bellman_target(rew, self.target_value(next_obs), done, cfg.gamma)
+            q_target = self.rules.bellman_target(rew, self.target_value(next_obs), done,
+                                                 cfg.gamma)
         q = self.critic(obs, act)
-        loss_q = critic_loss(q, q_target)
+        loss_q = self.rules.critic_loss(q, q_target)
         self._step(self.critic, self.critic_optimizer, loss_q, grad_reducer)
         if self.critic2 is not None:  # TD3: the second critic learns the same target
-            loss_q2 = critic_loss(self.critic2(obs, act), q_target)
+            loss_q2 = self.rules.critic_loss(self.critic2(obs, act), q_target)
             self._step(self.critic2, self.critic2_optimizer, loss_q2, grad_reducer)
         self.updates += 1
         stats = {"critic_loss": loss_q.item(), "q_mean": q.mean().item()}
@@ -514,17 +535,17 @@ class DDPG:
         # the policy loss must move the actor only, and this skips its useless gradients.
         self.critic.requires_grad_(False)
         u = self.actor.preactivation(obs)
-        loss_pi = policy_loss(self.critic(obs, self.actor.squash(u)))
+        loss_pi = self.rules.policy_loss(self.critic(obs, self.actor.squash(u)))
         if cfg.preactivation_l2 > 0:  # course option, not in the paper
             loss_pi = loss_pi + preactivation_penalty(u, cfg.preactivation_l2)
         self._step(self.actor, self.actor_optimizer, loss_pi, grad_reducer)
         self.critic.requires_grad_(True)
 
         # 4. Targets trail the trained networks.
-        polyak_update(self.actor_target, self.actor, cfg.tau)
-        polyak_update(self.critic_target, self.critic, cfg.tau)
+        self.rules.polyak_update(self.actor_target, self.actor, cfg.tau)
+        self.rules.polyak_update(self.critic_target, self.critic, cfg.tau)
         if self.critic2 is not None:
-            polyak_update(self.critic2_target, self.critic2, cfg.tau)
+            self.rules.polyak_update(self.critic2_target, self.critic2, cfg.tau)
 
         stats["policy_loss"] = loss_pi.item()
         return stats

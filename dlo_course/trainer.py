@@ -63,7 +63,7 @@ import torch
 from tqdm.auto import tqdm
 
 from dlo_course import mpi
-from dlo_course.ddpg import DDPG, DDPGConfig, save_network
+from dlo_course.ddpg import DDPG, DDPGConfig, UpdateRules, save_network
 from dlo_course.her import HindsightRelabeller
 from dlo_course.noise import OUNoise
 from dlo_course.replay_buffer import ReplayBuffer
@@ -585,7 +585,7 @@ def observation_reference(env: gymnasium.Env) -> tuple[np.ndarray, np.ndarray]:
 
 
 def train(config: TrainConfig, resume: bool = False, progress: bool = True,
-          overwrite: bool = False) -> Path:
+          overwrite: bool = False, rules: UpdateRules | None = None) -> Path:
     """Train DDPG agents as configured; every MPI rank runs this function as one agent.
 
     Args:
@@ -594,6 +594,9 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
             there is none). ``episodes`` may be raised to train a finished run further.
         progress: show a progress bar (rank 0 only).
         overwrite: allow starting a new run in a directory that already holds one.
+        rules: the DDPG update's formulas (:class:`~dlo_course.ddpg.UpdateRules`; the paper's
+            by default). Not part of the configuration: functions cannot be saved in
+            ``config.json``, so a run trained with other rules records only its settings.
 
     Returns:
         The run directory.
@@ -624,7 +627,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
     obs_offset, obs_scale = (observation_reference(env) if config.ddpg.normalize_obs
                              else (None, None))
     agent = DDPG(obs_dim, act_dim, env.action_space.low, env.action_space.high, config.ddpg,
-                 obs_offset, obs_scale)
+                 obs_offset, obs_scale, rules)
     # default_rng hashes its seed, so the neighbouring seeds give unrelated streams.
     buffer = ReplayBuffer(obs_dim, act_dim, config.ddpg.buffer_size, seed=agent_seed)
     noise = OUNoise(act_dim, config.ddpg.noise_theta, config.ddpg.noise_sigma,

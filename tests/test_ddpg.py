@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 import torch
 
+import dlo_course.ddpg as ddpg_module
 from dlo_course.ddpg import (DDPG, Actor, Critic, DDPGConfig, bellman_target, critic_loss,
                              load_network, polyak_update, policy_loss, save_network)
 
@@ -359,3 +360,30 @@ def test_all_td3_options_together_with_bigger_batches():
     stats = [agent.update(random_batch(rng, b=64)) for _ in range(4)]
     assert [("policy_loss" in s) for s in stats] == [False, True, False, True]
     assert all(np.isfinite(v) for s in stats for v in s.values())
+
+
+def test_update_rules_replace_the_formulas_without_patching_the_library():
+    """An agent built with other rules uses them; the next agent gets the paper's again."""
+    calls = []
+
+    def counting_critic_loss(q, q_target):
+        calls.append("critic_loss")
+        return ddpg_module.critic_loss(q, q_target)
+
+    def frozen_targets(target, source, tau):
+        calls.append("polyak_update")  # and leave the targets where they are
+
+    torch.manual_seed(0)
+    rules = ddpg_module.UpdateRules(critic_loss=counting_critic_loss, polyak_update=frozen_targets)
+    agent = ddpg_module.DDPG(3, 1, rules=rules)
+    before = [p.clone() for p in agent.actor_target.parameters()]
+    rng = np.random.default_rng(0)
+    batch = {"obs": rng.normal(size=(8, 3)), "act": rng.uniform(-1, 1, (8, 1)),
+             "rew": rng.normal(size=8), "next_obs": rng.normal(size=(8, 3)),
+             "done": np.zeros(8)}
+    agent.update(batch)
+    assert calls == ["critic_loss", "polyak_update", "polyak_update"]
+    for old, new in zip(before, agent.actor_target.parameters()):
+        torch.testing.assert_close(old, new)
+    assert ddpg_module.DDPG(3, 1).rules == ddpg_module.UpdateRules()
+    assert ddpg_module.UpdateRules().critic_loss is ddpg_module.critic_loss
