@@ -15,7 +15,7 @@ import argparse
 import numpy as np
 
 from dlo_course import load_database
-from dlo_course.env import DLOShapeEnv
+from dlo_course.env import make_env
 from dlo_course.mesh import SELECTED_RINGS, selected_nodes
 
 # The authors' small training file, 4 nodes (FACTS.md, "The authors' sweep, move by move").
@@ -28,10 +28,10 @@ AUTHORS_INITIAL_DISTANCE = 0.234
 
 def initial_distances(goals: np.ndarray) -> np.ndarray:
     """(N,) mean node distance from the environment's first observation to each goal."""
-    env = DLOShapeEnv(n_nodes=4, goals=goals)
+    env = make_env(max_episode_steps=None, n_nodes=4, goals=goals)
     try:
         env.reset(seed=0)
-        start = env.scene.node_positions()[list(selected_nodes(4))]
+        start = env.unwrapped.scene.node_positions()[list(selected_nodes(4))]
     finally:
         env.close()
     return np.linalg.norm(goals - start, axis=2).mean(axis=1)

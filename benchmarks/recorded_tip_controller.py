@@ -10,7 +10,7 @@ alone fixed the rod's shape, it would reach nearly every goal.
 import argparse
 
 from dlo_course import load_database
-from dlo_course.env import DLOShapeEnv
+from dlo_course.env import make_env
 from dlo_course.evaluation import goal_schedule, recorded_tip_controller, run_episodes, summarize
 
 
@@ -25,7 +25,8 @@ def main() -> None:
     args = parser.parse_args()
 
     db = load_database(args.database)
-    env = DLOShapeEnv(n_nodes=args.nodes, goals=args.database, threshold=args.threshold)
+    env = make_env(max_episode_steps=None, n_nodes=args.nodes, goals=args.database,
+                   threshold=args.threshold)
     try:
         schedule = goal_schedule(len(db.tip), args.episodes, args.seed)
         records = run_episodes(recorded_tip_controller(db, args.nodes), env,

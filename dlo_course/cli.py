@@ -1,38 +1,36 @@
 """The ``dlo-course`` command line.
 
 Each subcommand is a thin wrapper: it parses flags and calls one library function, so the
-lessons and the command line always run the same code. Heavy modules (torch, pybullet) are
-imported inside the commands to keep ``dlo-course --help`` instant.
+lessons and the command line always run the same code. Its choices and the defaults in its help
+come from the library (the configuration dataclasses, the presets, the goal sources), never
+restated here. Heavy modules (torch, pybullet) are imported inside the commands to keep
+``dlo-course --help`` instant: :mod:`dlo_course.config` imports neither.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import click
 
+from dlo_course.config import (PRESET_SUMMARIES, PRESETS, REDUCE_OPS, DDPGConfig, TrainConfig,
+                               paper_default, preset)
+from dlo_course.database import BOXES, GOAL_SOURCES
+from dlo_course.mesh import SELECTED_RINGS
 from dlo_course.paths import DATA_DIR
 
+PRESET_NAMES = click.Choice(list(PRESETS))
+NODE_COUNTS = click.Choice([str(n) for n in SELECTED_RINGS])
+TIME_MODES = click.Choice(["code", "paper"])  # SimParams.time_mode; simulation imports PyBullet
 
-class PresetChoice(click.Choice):
-    """``click.Choice`` among the trainer's presets (the keys of ``trainer.PRESETS``).
 
-    The names are read from the trainer when first needed (parsing or help of a command that
-    takes a preset), not when this module is imported: the trainer imports torch, which
-    would slow down every command."""
-
-    def __init__(self) -> None:
-        super().__init__(())
-
-    @property
-    def choices(self) -> tuple[str, ...]:
-        from dlo_course.trainer import PRESETS
-
-        return tuple(PRESETS)
-
-    @choices.setter
-    def choices(self, value: object) -> None:  # click.Choice.__init__ assigns it: ignored
-        pass
+def _paper(config_class: type, name: str) -> str:
+    """"[preset; the paper: X]" for a ``train`` option that overrides a preset's field."""
+    value = paper_default(config_class, name)
+    if isinstance(value, bool):
+        value = "on" if value else "off"
+    return f"[preset; the paper: {value}]"
 
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
@@ -54,7 +52,7 @@ def mesh(out: Path) -> None:
 
 
 @main.command()
-@click.option("--box", type=click.Choice(["small", "large"]), required=True,
+@click.option("--box", type=click.Choice(list(BOXES)), required=True,
               help="Which deformation box of the paper to sweep.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Output .npz (default: data/databases/BOX.npz).")
@@ -62,7 +60,7 @@ def mesh(out: Path) -> None:
               help="Record with the settled protocol, holding the tip still for this many "
                    "actions before each record (the first round used 15). Default: the "
                    "authors' sweep, a snapshot 6 ms after every move.")
-@click.option("--time-mode", type=click.Choice(["code", "paper"]), default="code",
+@click.option("--time-mode", type=TIME_MODES, default="code",
               show_default=True, help="Time per action of the settled protocol "
                                       "(see SimParams.time_mode).")
 @click.option("--limit", type=int, default=None,
@@ -71,7 +69,8 @@ def database(box: str, out: Path | None, settle_steps: int | None, time_mode: st
              limit: int | None) -> None:
     """Sweep the tip through a paper box and record every deformation (Fig. 3).
 
-    The small box takes about 6 minutes on one core, the large one about 17."""
+    The small box takes about 5 minutes on one core, the large one about 11 (docs/design.md,
+    "The deformation databases")."""
     from dlo_course.database import generate_database
 
     path = generate_database(box, out=out, settle_steps=settle_steps, time_mode=time_mode,
@@ -91,9 +90,9 @@ def plot_boxes(out: Path) -> None:
 
 
 @main.command()
-@click.option("--nodes", "n_nodes", type=click.Choice(["2", "4", "6"]), default="4",
+@click.option("--nodes", "n_nodes", type=NODE_COUNTS, default="4",
               show_default=True, help="Number of selected mesh nodes.")
-@click.option("--goals", type=click.Choice(["small", "large", "small-test", "large-test"]),
+@click.option("--goals", type=click.Choice(GOAL_SOURCES),
               default="small", show_default=True,
               help="Goal set: a whole database, or the paper's test goals drawn from it.")
 @click.option("--steps", type=click.IntRange(1, 10_000), default=30, show_default=True)
@@ -152,18 +151,18 @@ def bench_scene(actions: int, block: int, seed: int, switches: bool, knobs: bool
 
 
 @main.command()
-@click.option("--preset", "preset_name", type=PresetChoice(),
+@click.option("--preset", "preset_name", type=PRESET_NAMES,
               default="smoke", show_default=True,
-              help="Starting configuration: smoke (seconds, CI), laptop (~1 h on 4 cores), "
-                   "course (~40 min on 2 cores, with the course options that trained the "
-                   "shipped agents), paper (32 agents x 63 episodes x 300 steps), recipe "
-                   "(provisional: 4 nodes, 2 cores, every training lever below on). The flags "
-                   "below override it.")
+              help="Starting configuration: " + "; ".join(
+                  f"{name} ({summary})" for name, summary in PRESET_SUMMARIES.items())
+              + ". The flags below override it.")
 @click.option("--env", "env_id", default=None,
-              help="Gymnasium id of any continuous-control environment [preset: DLOShape-v0]. "
-                   "Changing it drops the preset's environment arguments.")
+              help="Gymnasium id of any continuous-control environment "
+                   f"{_paper(TrainConfig, 'env_id')}. Changing it drops the preset's "
+                   "environment arguments.")
 @click.option("--nodes", type=click.IntRange(min=1), default=None,
-              help="Rod nodes to control (2, 4 or 6) [preset; the paper: 2].")
+              help=f"Rod nodes to control ({', '.join(map(str, SELECTED_RINGS))}) [preset; "
+                   f"the paper: {paper_default(TrainConfig, 'env_kwargs')['n_nodes']}].")
 @click.option("--episodes", type=click.IntRange(min=1), default=None,
               help="Episodes per agent [preset].")
 @click.option("--steps-per-episode", type=click.IntRange(min=1), default=None,
@@ -171,40 +170,43 @@ def bench_scene(actions: int, block: int, seed: int, switches: bool, knobs: bool
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Run directory [runs/PRESET_ENV_nNODES_seedSEED].")
-@click.option("--resume", is_flag=True, help="Continue the run in --out from its last checkpoint.")
+@click.option("--resume", is_flag=True, help="Continue the run in --out from its resume state.")
 @click.option("--overwrite", is_flag=True, help="Start afresh even if --out holds a run.")
-@click.option("--reduce", type=click.Choice(["sum", "mean"]), default=None,
-              help="Combine the agents' gradients by sum (the paper) or mean [preset: sum].")
+@click.option("--reduce", type=click.Choice(REDUCE_OPS), default=None,
+              help=f"How to combine the agents' gradients {_paper(TrainConfig, 'reduce')}.")
 @click.option("--checkpoint-every", type=click.IntRange(min=1), default=None,
-              help="Episodes between checkpoints [preset].")
+              help="Episodes between two saves of the resume state [preset].")
 @click.option("--batch-size", type=click.IntRange(min=1), default=None,
-              help="Transitions per DDPG update [preset; the paper: 128].")
+              help=f"Transitions per DDPG update {_paper(DDPGConfig, 'batch_size')}.")
 @click.option("--updates-per-step", type=click.IntRange(min=1), default=None,
-              help="DDPG updates per environment step [preset; the paper: 1].")
+              help="DDPG updates per environment step "
+                   f"{_paper(TrainConfig, 'updates_per_step')}.")
 @click.option("--her-k", type=click.IntRange(min=0), default=None,
               help="Hindsight relabelling: copies of each transition with goals reached later "
-                   "in its episode (0: off) [preset; the paper: 0].")
+                   f"in its episode (0: off) {_paper(TrainConfig, 'her_k')}.")
 @click.option("--twin-critics/--no-twin-critics", default=None,
               help="TD3's clipped double Q: two critics, the target from the smaller "
-                   "[preset; the paper: off].")
+                   f"{_paper(DDPGConfig, 'twin_critics')}.")
 @click.option("--policy-delay", type=click.IntRange(min=1), default=None,
               help="TD3: update the actor and the targets every this many critic updates "
-                   "[preset; the paper: 1].")
+                   f"{_paper(DDPGConfig, 'policy_delay')}.")
 @click.option("--target-noise", type=click.FloatRange(min=0), default=None,
               help="TD3's target policy smoothing: noise std in normalised action units "
-                   "(0: off) [preset; the paper: 0].")
+                   f"(0: off) {_paper(DDPGConfig, 'target_noise')}.")
 @click.option("--target-noise-clip", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Clip of that noise [preset; default 0.5].")
+              help="Clip of that noise, in the same units "
+                   f"[preset; default {paper_default(DDPGConfig, 'target_noise_clip')}].")
 @click.option("--reset-between-episodes/--keep-shape", default=None,
               help="Rebuild the world before every training episode (the paper's text), or "
                    "start each from the shape the last one ended in (the authors' code) "
-                   "[preset; the paper: rebuild].")
+                   f"{_paper(TrainConfig, 'reset_between_episodes')}.")
 @click.option("--validate-every", type=click.IntRange(min=0), default=None,
               help="Every this many episodes, test the actor on held-out goals (not the "
                    "paper's test goals) and keep the best one in best_actor.pt (0: off) "
-                   "[preset; the paper: 0].")
+                   f"{_paper(TrainConfig, 'validate_every')}.")
 @click.option("--validation-goals", type=click.IntRange(min=1), default=None,
-              help="Number of those held-out goals [preset: 30].")
+              help="Number of those held-out goals "
+                   f"[preset; default {paper_default(TrainConfig, 'validation_goals')}].")
 @click.option("--progress/--no-progress", default=True, show_default=True,
               help="Progress bar (rank 0).")
 def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int | None,
@@ -215,10 +217,8 @@ def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int
           target_noise_clip: float | None, reset_between_episodes: bool | None,
           validate_every: int | None, validation_goals: int | None, progress: bool) -> None:
     """Train DDPG agents; run under `mpiexec -n N` for N parallel agents (the paper: 32)."""
-    import dataclasses
-
     from dlo_course import mpi
-    from dlo_course.trainer import preset, train as run_training
+    from dlo_course.trainer import train as run_training
 
     base = preset(preset_name)
     # A different environment does not take the rod's arguments (n_nodes...).
@@ -260,8 +260,8 @@ def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int
                    "goals (runs trained with --validate-every).")
 def ship(run_dir: Path, dest: Path, actor: str) -> None:
     """Copy a training run's agent and record into DEST (e.g. data/checkpoints/nodes4),
-    without its replay buffers."""
-    from dlo_course.reproduce import ship_run
+    without its resume state (replay buffers)."""
+    from dlo_course.rundir import ship_run
 
     try:
         ship_run(run_dir, dest, actor=actor)
@@ -290,8 +290,9 @@ def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...]) -> None
 
 # --- evaluation and reproduction ---
 @main.command()
-@click.option("--checkpoint", type=click.Path(path_type=Path), required=True,
-              help="Run directory holding actor.pt (or the actor.pt file).")
+@click.option("--agent", "--checkpoint", "agent", type=click.Path(path_type=Path),
+              required=True, help="Trained agent: a run directory or agent folder holding "
+                                  "actor.pt, or the actor.pt file (--checkpoint: the old name).")
 @click.option("--database", "goals", default="small", show_default=True,
               help="Goals: 'small-test' or 'large-test' (the goals of the paper's Table I), "
                    "'small' or 'large' (the whole database), a database .npz, or a .npy "
@@ -306,29 +307,28 @@ def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...]) -> None
 @click.option("--max-steps", type=click.IntRange(min=1), default=30, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed of the goal draw.")
-@click.option("--nodes", "n_nodes", type=click.Choice(["2", "4", "6"]), default=None,
-              help="Nodes the checkpoint must have been trained for (default: inferred).")
-@click.option("--time-mode", type=click.Choice(["code", "paper"]), default="code",
-              show_default=True)
+@click.option("--nodes", "n_nodes", type=NODE_COUNTS, default=None,
+              help="Nodes the agent must have been trained for (default: inferred).")
+@click.option("--time-mode", type=TIME_MODES, default="code", show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the summary and every episode as JSON.")
-def evaluate(checkpoint: Path, goals: str, thresholds: tuple[float, ...], no_reinit: bool,
+def evaluate(agent: Path, goals: str, thresholds: tuple[float, ...], no_reinit: bool,
              episodes: int, max_steps: int, seed: int, n_nodes: str | None, time_mode: str,
              out: Path | None) -> None:
-    """The paper's test protocol (Table I) for one checkpoint; parallel under mpiexec."""
+    """The paper's test protocol (Table I) for one trained agent; parallel under mpiexec."""
     import json
     from dataclasses import asdict
 
-    from dlo_course.evaluation import CheckpointError, evaluate_thresholds
+    from dlo_course.evaluation import TrainedAgentError, evaluate_thresholds
 
     thresholds = thresholds or (0.05,)
     try:
-        results = evaluate_thresholds(checkpoint, goals, thresholds,
+        results = evaluate_thresholds(agent, goals, thresholds,
                                       reinitialize=not no_reinit, episodes=episodes,
                                       max_steps=max_steps, seed=seed,
                                       n_nodes=None if n_nodes is None else int(n_nodes),
                                       time_mode=time_mode)
-    except (CheckpointError, FileNotFoundError, ValueError) as err:
+    except (TrainedAgentError, FileNotFoundError, ValueError) as err:
         raise click.ClickException(str(err)) from None
     written = {}
     for threshold, (s, records) in results.items():
@@ -430,9 +430,10 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
 @main.command()
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               default=Path("reports/reproduction"), show_default=True)
-@click.option("--checkpoints", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Folder with nodes2/ nodes4/ nodes6/ run directories "
-                   "(default: the shipped data/checkpoints).")
+@click.option("--agents", "--checkpoints", "checkpoints",
+              type=click.Path(file_okay=False, path_type=Path), default=None,
+              help="Folder with nodes2/ nodes4/ nodes6/ trained agents or run directories "
+                   "(default: the shipped data/checkpoints; --checkpoints: the old name).")
 @click.option("--episodes", type=click.IntRange(min=1), default=None,
               help="Test episodes per setting (default 100; the paper: 1000).")
 @click.option("--max-steps", type=click.IntRange(min=1), default=None,
@@ -442,18 +443,17 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
               help="Which cells also get the harder protocol, goals drawn from the whole "
                    "database: those with reinitialisation, all, or none.")
 @click.option("--train", "retrain", is_flag=True,
-              help="Train the three agents with --preset first, instead of using checkpoints.")
-@click.option("--preset", "preset_name", type=PresetChoice(),
+              help="Train the three agents with --preset first, instead of using --agents.")
+@click.option("--preset", "preset_name", type=PRESET_NAMES,
               default=None, help="Trainer preset for --train. 'smoke' alone runs the whole "
                                  "pipeline in minutes (tiny training, 2 episodes per setting).")
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--time-mode", type=click.Choice(["code", "paper"]), default="code",
-              show_default=True)
+@click.option("--time-mode", type=TIME_MODES, default="code", show_default=True)
 def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_steps: int | None,
               whole_database: str, retrain: bool, preset_name: str | None, seed: int,
               time_mode: str) -> None:
     """Regenerate the paper's Table I and Figs. 4-5 beside the published numbers."""
-    from dlo_course.evaluation import CheckpointError
+    from dlo_course.evaluation import TrainedAgentError
     from dlo_course.reproduce import reproduce as run
 
     smoke = preset_name == "smoke"
@@ -461,17 +461,16 @@ def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_ste
         raise click.UsageError("--preset chooses how to retrain: add --train "
                                "(only 'smoke' implies it)")
     if retrain and preset_name is None:
-        raise click.UsageError("--train needs --preset "
-                               + "|".join(PresetChoice().choices))
+        raise click.UsageError("--train needs --preset " + "|".join(PRESETS))
     if retrain and checkpoints is not None:
-        raise click.UsageError("--train writes new checkpoints; drop --checkpoints")
+        raise click.UsageError("--train trains new agents; drop --agents")
     episodes = episodes or (2 if smoke else 100)
     max_steps = max_steps or (10 if smoke else 30)
     try:
         report = run(out, checkpoints=checkpoints, episodes=episodes, max_steps=max_steps,
                      seed=seed, train_preset=preset_name if (retrain or smoke) else None,
                      time_mode=time_mode, whole_database=whole_database)
-    except (CheckpointError, FileNotFoundError) as err:
+    except (TrainedAgentError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from None
     if report is not None:
         click.echo(f"wrote {report} and the tables and figures beside it")

@@ -45,80 +45,8 @@ import numpy as np
 import torch
 from torch import nn
 
-
-@dataclass
-class DDPGConfig:
-    """Hyperparameters of DDPG. The defaults are the paper's (Section V-B)."""
-
-    actor_lr: float = 1e-4
-    """Adam learning rate of the actor (alpha_A)."""
-    critic_lr: float = 1e-3
-    """Adam learning rate of the critic (alpha_C). Ten times the actor's: the actor follows
-    the critic's gradient, so the critic has to be the better-trained of the two."""
-    batch_size: int = 128
-    """Transitions per update (N). Learning starts once the buffer holds one batch."""
-    buffer_size: int = 50_000
-    """Capacity of the replay buffer of each agent."""
-    gamma: float = 0.99
-    """Discount factor: a reward k steps ahead counts gamma**k (horizon ~ 1/(1-gamma) = 100)."""
-    tau: float = 0.01
-    """Polyak factor of the soft target update, applied after every update."""
-    hidden_sizes: tuple[int, ...] = (256, 256, 256)
-    """Widths of the hidden layers of the actor and of the critic (3 x 256, ReLU)."""
-    final_init: float = 3e-3
-    """The output layers start with weights and biases uniform in [-final_init, final_init]
-    (Lillicrap et al., whose initialisation the paper follows), so initial actions and
-    Q-values are close to 0 and the tanh is not saturated. The hidden layers keep PyTorch's
-    default, which is Lillicrap's fan-in uniform initialisation."""
-    noise_theta: float = 0.15
-    """Ornstein–Uhlenbeck mean-reversion rate (the authors' code)."""
-    noise_sigma: float = 0.3
-    """Ornstein–Uhlenbeck noise scale, in units of the normalised action [-1, 1]."""
-    noise_mu: float = 0.0
-    """Ornstein–Uhlenbeck mean."""
-
-    # --- course options, off by default (the paper has neither); see docs/design.md ---
-    normalize_obs: bool = False
-    """Feed the networks ``(obs - offset) / scale`` with a fixed offset and scale from the
-    environment (:meth:`DLOShapeEnv.observation_reference`) instead of the raw observation.
-    The raw rod observation mixes positions of ~1 m with tip speeds up to 20 m/s."""
-    preactivation_l2: float = 0.0
-    """Weight of a penalty ``mean(u**2)`` on the actor's output before the tanh, added to the
-    policy loss. A saturated tanh has no gradient, so an actor pushed to +-1 stays there;
-    the penalty pulls it back where the critic's gradient can reach it."""
-
-    # --- TD3's fixes (Fujimoto et al. 2018), course options, off by default ---
-    twin_critics: bool = False
-    """Clipped double Q: train a second critic on the same target and build the target from
-    the smaller of the two target critics' values. ``critic.pt`` stays the first critic."""
-    policy_delay: int = 1
-    """Update the actor and all targets once every this many critic updates (1: every time,
-    as in DDPG; TD3: 2)."""
-    target_noise: float = 0.0
-    """Standard deviation of the Gaussian noise added to the target actor's action in the
-    Bellman target, in units of the normalised action [-1, 1] (0: none, as in DDPG; TD3:
-    0.2)."""
-    target_noise_clip: float = 0.5
-    """That noise is clipped to [-target_noise_clip, target_noise_clip] (normalised action
-    units; TD3: 0.5). Only used when ``target_noise`` > 0."""
-
-    def __post_init__(self) -> None:
-        self.hidden_sizes = tuple(int(h) for h in self.hidden_sizes)  # a list from JSON
-        if self.batch_size < 1 or self.buffer_size < 1:
-            raise ValueError("batch_size and buffer_size must be positive")
-        if not 0.0 <= self.gamma <= 1.0:
-            raise ValueError(f"gamma must be in [0, 1], got {self.gamma}")
-        if not 0.0 < self.tau <= 1.0:
-            raise ValueError(f"tau must be in (0, 1], got {self.tau}")
-        if self.actor_lr <= 0 or self.critic_lr <= 0:
-            raise ValueError("learning rates must be positive")
-        if self.preactivation_l2 < 0:
-            raise ValueError(f"preactivation_l2 must be >= 0, got {self.preactivation_l2}")
-        if self.policy_delay < 1:
-            raise ValueError(f"policy_delay must be at least 1, got {self.policy_delay}")
-        if self.target_noise < 0 or not self.target_noise_clip > 0:
-            raise ValueError(f"target_noise must be >= 0 and target_noise_clip > 0, got "
-                             f"{self.target_noise} and {self.target_noise_clip}")
+# Its old home: the lessons import DDPGConfig from here.
+from dlo_course.config import DDPGConfig
 
 
 # --- the pieces of one update, as pure functions ---
@@ -359,6 +287,27 @@ class Critic(nn.Module):
         return self.net(torch.cat([self.scaling(obs), act], dim=-1))
 
 
+@torch.no_grad()
+def policy_action(actor: nn.Module, obs: np.ndarray) -> np.ndarray:
+    """The deterministic policy's action for an observation: NumPy in, NumPy out, no
+    gradient. Every place that turns an observation into an action goes through here
+    (training, validation, evaluation, figures), so they all compute it the same way.
+
+    Args:
+        actor: an :class:`Actor`, or any module mapping (B, obs_dim) float32 tensors to
+            (B, act_dim) actions (e.g. :func:`dlo_course.evaluation.recorded_tip_controller`).
+        obs: (obs_dim,) one observation or (B, obs_dim) several, any float dtype (cast to
+            float32, the networks' dtype).
+
+    Returns:
+        float32 array of the actor's output, (act_dim,) or (B, act_dim): the same batch
+        shape as ``obs``. A single observation is *not* given a batch axis: a network's
+        last bits may differ between a vector and a batch of one, and callers keep the
+        shape they always used so that seeded results stay bit-identical.
+    """
+    return actor(torch.as_tensor(np.asarray(obs, dtype=np.float32))).numpy()
+
+
 def save_network(net: Actor | Critic, path: str | Path) -> None:
     """Save a network with what is needed to rebuild it (see :func:`load_network`)."""
     torch.save({"class": type(net).__name__, "kwargs": net.init_kwargs,
@@ -453,8 +402,7 @@ class DDPG:
         Returns:
             float32 array, (act_dim,) (or (B, act_dim)), clipped to the action bounds.
         """
-        obs_t = torch.as_tensor(np.asarray(obs, dtype=np.float32))
-        action = self.actor(obs_t).numpy()
+        action = policy_action(self.actor, obs)
         scale = self.actor.action_scale.numpy()
         if noise is not None:
             # Noise is drawn for the normalised action and scaled like the actor's tanh output,
@@ -596,4 +544,4 @@ class DDPG:
             self.critic2.load_state_dict(state["critic2"])
             self.critic2_target.load_state_dict(state["critic2_target"])
             self.critic2_optimizer.load_state_dict(state["critic2_optimizer"])
-        self.updates = int(state.get("updates", 0))  # absent in checkpoints older than TD3
+        self.updates = int(state.get("updates", 0))  # absent in resume states older than TD3

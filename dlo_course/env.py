@@ -1,26 +1,12 @@
 """``DLOShape-v0``: the paper's task as a Gymnasium environment (Sections IV-E and V).
 
-A Panda holds the top of a soft rod whose bottom is fixed to the ground. Each episode draws a
-goal: desired positions P_d of m selected mesh nodes (m = 2, 4 or 6), taken from a deformation
-database. The agent commands the tip's Cartesian velocity; it succeeds when the mean distance
-between the current node positions P_c and P_d falls below a threshold.
-
-Observation (float32, size 6 + 6m: 18 / 30 / 42), the paper's eq. (4)::
-
-    [ tip position (3) | tip velocity (3) | P_c (3m) | P_d (3m) ]
-
-Action: Box(-1, 1, (3,)), the tip velocity as a fraction of v_max = 1 m/s. It is integrated
-over 0.06 s into a tip target, clipped to the tip workspace box, and reached through the
-Panda's inverse kinematics with the tip orientation held. Out-of-range actions are clipped;
-non-finite actions raise ``ValueError``.
-
-Reward, the paper's eq. (5): ``r = -mean_i ||P_c,i - P_d,i||`` (metres).
-``terminated`` when that mean distance is below ``threshold``.
+Build it with :func:`make_env` (or ``gymnasium.make("DLOShape-v0", ...)``, the same thing):
+the library builds every one of its rod environments that way, so they all carry Gymnasium's
+usual wrappers and their step limit as a ``TimeLimit``.
 """
 
 from __future__ import annotations
 
-import time
 from typing import Any
 
 import gymnasium as gym
@@ -31,35 +17,120 @@ from dlo_course.database import resolve_goals
 from dlo_course.mesh import selected_nodes
 from dlo_course.simulation import RodScene, SimParams
 
+ENV_ID = "DLOShape-v0"
+MAX_EPISODE_STEPS = 300
+"""The registered step limit: the paper's training episode (its test episodes: 30)."""
 
-class DLOShapeEnv(gym.Env):
-    """Shape control of a deformable linear object by a Panda (see the module docstring).
+
+def make_env(max_episode_steps: int | None = MAX_EPISODE_STEPS, **kwargs: Any) -> gym.Env:
+    """``DLOShape-v0`` through ``gymnasium.make``: the one way the library builds it.
 
     Args:
-        n_nodes: number of selected nodes, 2, 4 or 6 (the paper's three trainings).
-        goals: where the desired shapes come from (:func:`dlo_course.database.resolve_goals`):
-            "small" or "large" (every record of the paper's deformation databases),
-            "small-test" or "large-test" (the goals the paper's Table I was measured on),
-            a database or goal file path, or an array (K, n_nodes, 3) of desired node
-            positions in metres, world frame.
-        threshold: success distance (m); the paper trains at 0.05 and tests at 0.05 and 0.03.
-        max_episode_steps: truncate after this many actions. ``gymnasium.make`` applies its
-            own limit (300 for ``DLOShape-v0``, the paper's training episode); pass it there.
-        render_mode: None, "rgb_array" (an image of robot and rod, P_c blue and P_d red
-            crosses) or "human" (PyBullet's GUI; needs a display).
-        time_mode: "code" (3 ms of physics per action, the authors' code, default) or
-            "paper" (0.06 s per action, 20 times slower); overrides ``params.time_mode``.
-        params: all physical and timing parameters (:class:`SimParams`); paper defaults.
+        max_episode_steps: truncate an episode after this many actions (Gymnasium's
+            ``TimeLimit``); ``None``: no limit.
+        **kwargs: the arguments of :class:`DLOShapeEnv`.
 
-    Every reset lets the world settle before the first observation, as the authors' reset
-    did: ``params.reset_steps(n_nodes, rebuilt)`` physics steps (12 + m, plus 8 after a
-    rebuild; :class:`SimParams` ``reset_settle_steps`` and ``rebuild_settle_steps``).
+    Returns:
+        The wrapped environment; ``env.unwrapped`` is the :class:`DLOShapeEnv` (its
+        ``scene``, ``goal_set``, ``threshold``...).
+    """
+    # gymnasium.make's -1 means "no TimeLimit at all" (None would mean the registered 300).
+    return gym.make(ENV_ID, max_episode_steps=-1 if max_episode_steps is None
+                    else max_episode_steps, **kwargs)
 
-    Reset options:
-        ``{"reinitialize": True}`` (default) rebuilds the initial scene;
-        ``{"reinitialize": False}`` keeps the rod's current shape and only draws a new goal
-        (the paper's test "without reinitialization"). ``{"goal_index": i}`` picks goal i
-        instead of drawing one.
+
+class DLOShapeEnv(gym.Env):
+    """Shape control of a deformable linear object by a Panda.
+
+    ## Description
+
+    A Franka Panda holds the top of a 1.55 m tetrahedral FEM rod whose bottom is fixed to the
+    ground (Zakaria et al., CASE 2022). Each episode draws a goal: desired positions P_d of m
+    selected mesh nodes (m = 2, 4 or 6), a shape the rod took in a deformation database. The
+    agent moves the gripper so that the current positions P_c of those nodes reach P_d.
+
+    ## Action Space
+
+    ``Box(-1, 1, (3,), float32)``: the tip's Cartesian velocity as a fraction of
+    ``v_max`` = 1 m/s. It is integrated over ``action_duration`` = 0.06 s into a tip target,
+    clipped to the tip workspace box, and reached through the Panda's inverse kinematics
+    with the tip orientation held. Out-of-range actions are clipped; non-finite ones raise
+    ``ValueError``.
+
+    ## Observation Space
+
+    ``Box(float32)`` of size 6 + 6m (18, 30 or 42), the paper's eq. (4), clipped to generous
+    finite bounds:
+
+    =========  ===========================  ======  ==========
+    index      what                         unit    bound
+    =========  ===========================  ======  ==========
+    0-2        tip position (world frame)   m       +-10
+    3-5        tip linear velocity          m/s     +-100
+    6..6+3m    P_c, current node positions  m       +-10
+    6+3m..     P_d, desired node positions  m       +-10
+    =========  ===========================  ======  ==========
+
+    ## Rewards
+
+    The paper's eq. (5): ``r = -mean_i ||P_c,i - P_d,i||`` (metres) after every action.
+
+    ## Starting State
+
+    The initial scene (the arm in the authors' posture, the rod straight) rebuilt, or with
+    ``reset(options={"reinitialize": False})`` the rod's current shape kept (the paper's test
+    "without reinitialization"); a goal drawn uniformly from the goal set, or
+    ``options={"goal_index": i}``. Every reset then lets the world settle as the authors'
+    reset did: ``params.reset_steps(n_nodes, rebuilt)`` physics steps (12 + m, plus 8 after a
+    rebuild).
+
+    ## Episode End
+
+    * Termination: the mean node distance falls below ``threshold``.
+    * Truncation: the ``TimeLimit`` of :func:`make_env` (``max_episode_steps``, 300 when
+      registered: the paper's training episode), or a simulation that blew up; then ``info``
+      says ``simulation_unstable``, the agent gets the last sane observation, and the next
+      reset rebuilds the world.
+
+    ``info``: ``distance``, ``is_success``, ``tip_position``, ``goal_index``,
+    ``simulation_unstable``.
+
+    ## Arguments
+
+    * ``n_nodes``: number of selected nodes, 2, 4 or 6 (the paper's three trainings).
+    * ``goals``: where the desired shapes come from
+      (:func:`dlo_course.database.resolve_goals`): "small" or "large" (every record of the
+      paper's deformation databases), "small-test" or "large-test" (the goals the paper's
+      Table I was measured on), a database or goal file path, or an array (K, n_nodes, 3) of
+      desired node positions in metres, world frame.
+    * ``threshold``: success distance (m); the paper trains at 0.05 and tests at 0.05 and 0.03.
+    * ``render_mode``: None, "rgb_array" (an image of robot and rod, P_c blue and P_d red
+      crosses) or "human" (PyBullet's GUI; needs a display).
+    * ``time_mode``: physics time per action, "code" (3 ms, the authors' code; the default) or
+      "paper" (0.06 s, 20 times the compute): a shortcut for ``params.with_(time_mode=...)``,
+      and the one to use; given, it overrides ``params.time_mode``.
+    * ``params``: every physical and timing parameter (:class:`SimParams`), the paper's and
+      the authors' values by default.
+
+    ## Version History
+
+    * v0 (this version). Decisions that change behaviour, each a parameter:
+
+      - time per action: ``time_mode="code"`` by default, because the published numbers come
+        from the authors' code, which advances 3 ms per action where the paper's text says
+        0.06 s (``"paper"``);
+      - goals: the default databases are recorded with the authors' sweep protocol (a
+        snapshot 6 ms after every move of a continuous sweep), not the first round's settled
+        protocol (``small_settled`` / ``large_settled``);
+      - reset settling: every reset steps the world 12 + m times (20 + m after a rebuild)
+        before the first observation, as the authors' reset did
+        (``SimParams.reset_settle_steps``, ``rebuild_settle_steps``; 0 and 0 give the first
+        round's behaviour);
+      - edge damping: the rod carries a 1 N·s/m dashpot (and a 1 N/m spring) on every mesh
+        edge, which PyBullet had been adding unasked and the authors' rod had too
+        (``SimParams.edge_damping``; 0 removes them);
+      - the step limit is only ``TimeLimit``'s: the environment no longer takes a
+        ``max_episode_steps`` of its own.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
@@ -69,7 +140,6 @@ class DLOShapeEnv(gym.Env):
         n_nodes: int = 4,
         goals: str | np.ndarray = "small",
         threshold: float = 0.05,
-        max_episode_steps: int | None = None,
         render_mode: str | None = None,
         time_mode: str | None = None,
         params: SimParams | None = None,
@@ -80,9 +150,6 @@ class DLOShapeEnv(gym.Env):
         if not (np.isfinite(threshold) and threshold > 0):
             raise ValueError(f"threshold must be a positive distance in metres, got {threshold}")
         self.threshold = float(threshold)
-        if max_episode_steps is not None and max_episode_steps < 1:
-            raise ValueError(f"max_episode_steps must be >= 1, got {max_episode_steps}")
-        self.max_episode_steps = max_episode_steps
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode = render_mode
@@ -102,7 +169,6 @@ class DLOShapeEnv(gym.Env):
         self.scene = RodScene(params, gui=render_mode == "human")
         self.goal_index = -1
         self.goal = np.zeros((n_nodes, 3))
-        self._steps = 0
         self._last_obs: np.ndarray | None = None  # last sane observation, None before reset
         self._last_distance = np.nan
         self._fresh = True  # the scene is in its initial configuration, untouched
@@ -132,7 +198,6 @@ class DLOShapeEnv(gym.Env):
             index = int(self.np_random.integers(len(self.goal_set)))
         self.goal_index = index
         self.goal = self.goal_set[index]
-        self._steps = 0
         nodes = self.scene.node_positions()
         obs, distance = self._observe(nodes)
         self._last_obs, self._last_distance = obs, distance
@@ -150,11 +215,7 @@ class DLOShapeEnv(gym.Env):
             raise RuntimeError("the simulation blew up in this episode; call reset()")
         action = np.clip(action, -1.0, 1.0)
 
-        t = time.perf_counter()
-        target = self.scene.tip_target(action)
-        self.scene.timings.other += time.perf_counter() - t
-        self.scene.move_tip_to(target)
-        self._steps += 1
+        self.scene.move_tip_to(self.scene.tip_target(action))
 
         nodes = self.scene.node_positions()
         if self.scene.is_unstable(nodes):
@@ -167,8 +228,7 @@ class DLOShapeEnv(gym.Env):
         obs, distance = self._observe(nodes)
         self._last_obs, self._last_distance = obs, distance
         terminated = bool(distance < self.threshold)
-        truncated = self.max_episode_steps is not None and self._steps >= self.max_episode_steps
-        return obs, -distance, terminated, bool(truncated), self._info(distance, False)
+        return obs, -distance, terminated, False, self._info(distance, False)
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -203,14 +263,12 @@ class DLOShapeEnv(gym.Env):
 
     # -------------------------------------------------------------- helpers
     def _observe(self, nodes: np.ndarray) -> tuple[np.ndarray, float]:
-        t = time.perf_counter()
         tip, velocity = self.scene.tip_state()
         current = nodes[self.node_ids]
         distance = mean_node_distance(current, self.goal)
         obs = np.concatenate([tip, velocity, current.ravel(), self.goal.ravel()])
         obs = np.clip(obs, self.observation_space.low, self.observation_space.high,
                       dtype=np.float32)
-        self.scene.timings.observation += time.perf_counter() - t
         return obs, distance
 
     def _info(self, distance: float, unstable: bool) -> dict[str, Any]:

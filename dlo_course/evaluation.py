@@ -30,8 +30,16 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
+import torch
+from torch import nn
+from tqdm.auto import tqdm
 
-CHECKPOINT_FILE = "actor.pt"
+from dlo_course import mpi
+from dlo_course.database import resolve_goals
+from dlo_course.ddpg import Actor, load_network, policy_action
+from dlo_course.rundir import ACTOR_FILE
+
+CHECKPOINT_FILE = ACTOR_FILE  # its old name
 
 
 # ------------------------------------------------------------------------------ statistics
@@ -103,13 +111,17 @@ def summarize(records: Sequence[EpisodeRecord]) -> Summary:
     )
 
 
-# ------------------------------------------------------------------------------ checkpoints
-class CheckpointError(ValueError):
-    """A checkpoint is missing, unreadable, or does not fit the task it is evaluated on."""
+# ------------------------------------------------------------------------------ trained agents
+class TrainedAgentError(ValueError):
+    """A trained agent is missing, unreadable, or does not fit the task it is evaluated on."""
 
 
-def load_actor(checkpoint: str | Path, n_nodes: int | None = None):
-    """Load the trained actor of ``checkpoint`` (a run directory or an ``actor.pt`` file).
+CheckpointError = TrainedAgentError  # its old name
+
+
+def load_actor(agent: str | Path, n_nodes: int | None = None):
+    """Load the actor of a trained agent: a run directory, a shipped agent's folder (both
+    hold ``actor.pt``) or an actor file.
 
     Args:
         n_nodes: when given, the actor must have been trained for that many nodes.
@@ -119,35 +131,33 @@ def load_actor(checkpoint: str | Path, n_nodes: int | None = None):
         nodes its observation implies.
 
     Raises:
-        CheckpointError: with a message that says what is wrong and what to do.
+        TrainedAgentError: with a message that says what is wrong and what to do.
     """
-    from dlo_course.ddpg import Actor, load_network
-
-    path = Path(checkpoint)
+    path = Path(agent)
     if path.is_dir():
-        path = path / CHECKPOINT_FILE
+        path = path / ACTOR_FILE
     if not path.is_file():
-        raise CheckpointError(f"no checkpoint at {checkpoint}: expected a run directory with "
-                              f"{CHECKPOINT_FILE}, or the file itself (train one with "
-                              "`dlo-course train`)")
+        raise TrainedAgentError(f"no trained agent at {agent}: expected a run directory or "
+                                f"an agent folder with {ACTOR_FILE}, or the file itself "
+                                "(train one with `dlo-course train`)")
     try:
         actor = load_network(path)
     except Exception as err:  # torch and pickle raise many kinds
-        raise CheckpointError(f"{path} is not a readable actor checkpoint "
-                              f"({type(err).__name__}: {err})") from err
+        raise TrainedAgentError(f"{path} is not a readable actor file "
+                                f"({type(err).__name__}: {err})") from err
     if not isinstance(actor, Actor):
-        raise CheckpointError(f"{path} holds a {type(actor).__name__}, not an Actor")
+        raise TrainedAgentError(f"{path} holds a {type(actor).__name__}, not an Actor")
     obs_dim = actor.init_kwargs["obs_dim"]
     act_dim = actor.init_kwargs["act_dim"]
     trained_nodes = (obs_dim - 6) // 6
     if act_dim != 3 or obs_dim != 6 + 6 * trained_nodes or trained_nodes not in (2, 4, 6):
-        raise CheckpointError(f"{path} was not trained on DLOShape-v0 (observation {obs_dim}, "
-                              f"action {act_dim}; the rod needs 18/30/42 and 3)")
+        raise TrainedAgentError(f"{path} was not trained on DLOShape-v0 (observation "
+                                f"{obs_dim}, action {act_dim}; the rod needs 18/30/42 and 3)")
     if n_nodes is not None and n_nodes != trained_nodes:
-        raise CheckpointError(f"{path} was trained for {trained_nodes} nodes (observation "
-                              f"{obs_dim}) but is evaluated for {n_nodes} nodes (observation "
-                              f"{6 + 6 * n_nodes}); pass --nodes {trained_nodes} or another "
-                              "checkpoint")
+        raise TrainedAgentError(f"{path} was trained for {trained_nodes} nodes (observation "
+                                f"{obs_dim}) but is evaluated for {n_nodes} nodes "
+                                f"(observation {6 + 6 * n_nodes}); pass --nodes "
+                                f"{trained_nodes} or another agent")
     actor.eval()
     return actor, trained_nodes
 
@@ -171,10 +181,7 @@ def recorded_tip_controller(database, n_nodes: int):
     Returns:
         A module mapping (B, 6 + 6 n_nodes) observations to (B, 3) actions in [-1, 1].
     """
-    import torch
-    from torch import nn
-
-    from dlo_course.simulation import SimParams
+    from dlo_course.simulation import SimParams  # imports PyBullet: only when needed
 
     goals = torch.as_tensor(database.goals(n_nodes).reshape(len(database.tip), -1),
                             dtype=torch.float32)
@@ -211,13 +218,10 @@ def play_episode(actor, env, obs: np.ndarray, max_steps: int) -> tuple[bool, int
 
 def _play(actor, env, obs: np.ndarray, max_steps: int) -> tuple[bool, list[float], dict]:
     """:func:`play_episode`, also returning the mean node distance after every action."""
-    import torch
-
     distances: list[float] = []
     info: dict = {}
     for _ in range(max_steps):
-        with torch.no_grad():
-            action = actor(torch.as_tensor(obs[None]))[0].numpy()
+        action = policy_action(actor, obs[None])[0]  # a batch of one, as it always was
         obs, _, terminated, truncated, info = env.step(action)
         distances.append(float(info["distance"]))
         if terminated or truncated:
@@ -297,22 +301,23 @@ def run_episodes(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarra
             for episode, trace in zip(episode_ids, traces)]
 
 
-def evaluate(checkpoint: str | Path, goals: str | Path | np.ndarray = "small",
+def evaluate(agent: str | Path, goals: str | Path | np.ndarray = "small",
              threshold: float = 0.05, reinitialize: bool = True, episodes: int = 1000,
              max_steps: int = 30, seed: int = 0, n_nodes: int | None = None,
              time_mode: str = "code", show_progress: bool = True) -> tuple[Summary | None, list]:
-    """Table I's protocol for one checkpoint and setting; runs on every MPI rank.
+    """Table I's protocol for one trained agent (:func:`load_actor`) and setting; runs on
+    every MPI rank.
 
     Episodes are split over the ranks (see the module docstring); rank 0 gathers them.
 
     Returns:
         (summary, records) on rank 0, sorted by episode; (None, []) on the other ranks.
     """
-    return evaluate_thresholds(checkpoint, goals, (threshold,), reinitialize, episodes,
+    return evaluate_thresholds(agent, goals, (threshold,), reinitialize, episodes,
                                max_steps, seed, n_nodes, time_mode, show_progress)[threshold]
 
 
-def evaluate_thresholds(checkpoint: str | Path, goals: str | Path | np.ndarray,
+def evaluate_thresholds(agent: str | Path, goals: str | Path | np.ndarray,
                         thresholds: Sequence[float], reinitialize: bool = True,
                         episodes: int = 1000, max_steps: int = 30, seed: int = 0,
                         n_nodes: int | None = None, time_mode: str = "code",
@@ -326,11 +331,7 @@ def evaluate_thresholds(checkpoint: str | Path, goals: str | Path | np.ndarray,
     Returns:
         {threshold: (summary, records)} as :func:`evaluate` gives them.
     """
-    from tqdm.auto import tqdm
-
-    from dlo_course import mpi
-    from dlo_course.database import resolve_goals
-    from dlo_course.env import DLOShapeEnv
+    from dlo_course.env import make_env  # imports PyBullet: only when needed
 
     if episodes < 1:
         raise ValueError(f"episodes must be at least 1, got {episodes}")
@@ -338,7 +339,7 @@ def evaluate_thresholds(checkpoint: str | Path, goals: str | Path | np.ndarray,
         raise ValueError(f"max_steps must be at least 1, got {max_steps}")
     if not thresholds:
         raise ValueError("give at least one threshold")
-    actor, n_nodes = load_actor(checkpoint, n_nodes)
+    actor, n_nodes = load_actor(agent, n_nodes)
     goal_set = resolve_goals(goals, n_nodes)
     schedule = goal_schedule(len(goal_set), episodes, seed)
     rank, size = mpi.rank(), mpi.size()
@@ -350,8 +351,9 @@ def evaluate_thresholds(checkpoint: str | Path, goals: str | Path | np.ndarray,
                unit="episode", disable=not (show_progress and rank == 0))
     try:
         for run_threshold in runs:
-            env = DLOShapeEnv(n_nodes=n_nodes, goals=goal_set, threshold=run_threshold,
-                              time_mode=time_mode)
+            # No TimeLimit: run_traces stops every episode after max_steps itself.
+            env = make_env(max_episode_steps=None, n_nodes=n_nodes, goals=goal_set,
+                           threshold=run_threshold, time_mode=time_mode)
             try:
                 traces = run_traces(actor, env, mine, schedule, reinitialize, max_steps,
                                     progress=lambda: bar.update(1))

@@ -27,7 +27,7 @@ length, ``N = T * k`` the number of relabelled copies.
 
 The functions are pure (:func:`goal_distance`, :func:`relabel`), apart from
 :func:`future_goal_steps` which draws from the generator it is given;
-:class:`HindsightRelabeller` holds that generator (seeded, saved in checkpoints) for the
+:class:`HindsightRelabeller` holds that generator (seeded, saved in the resume state) for the
 trainer (``TrainConfig.her_k``).
 """
 
@@ -172,7 +172,7 @@ class HindsightRelabeller:
         threshold: the environment's success distance (m).
         k: relabelled copies per real transition (``TrainConfig.her_k``; the HER paper's 4).
         seed: seed of the generator that draws the goal steps. Like the replay buffer and the
-            noise, it owns its generator so that its state can be checkpointed (exact resume).
+            noise, it owns its generator so that its state can be saved in the resume state (exact resume).
     """
 
     def __init__(self, n_nodes: int, threshold: float, k: int, seed: int | None = None) -> None:

@@ -100,11 +100,6 @@ def broadcast_module(module: nn.Module, root: int = 0) -> None:
             comm().Bcast(tensor.numpy(), root=root)
 
 
-def broadcast_object(obj: Any, root: int = 0) -> Any:
-    """Rank ``root``'s ``obj`` (any picklable object), returned on every rank."""
-    return obj if size() == 1 else comm().bcast(obj, root=root)
-
-
 def allreduce_gradients(module: nn.Module, op: str = "sum") -> None:
     """Replace, in place, each parameter's ``.grad`` by its sum (or mean) over all ranks.
 

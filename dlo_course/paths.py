@@ -13,4 +13,6 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 DATA_DIR = Path(os.environ.get("DLO_COURSE_DATA", REPO_ROOT / "data"))
 MESH_PATH = DATA_DIR / "rod.vtk"
 DATABASE_DIR = DATA_DIR / "databases"
-CHECKPOINT_DIR = DATA_DIR / "checkpoints"
+AGENTS_DIR = DATA_DIR / "checkpoints"
+"""The shipped trained agents, one folder per node count (:func:`dlo_course.rundir.agent_dir`)."""
+CHECKPOINT_DIR = AGENTS_DIR  # the old name, used by the lessons

@@ -1,13 +1,34 @@
-"""Figures of the environment and the databases (matplotlib, headless-safe)."""
+"""Every figure of the course (matplotlib, headless-safe), after the paper's:
+
+* Fig. 3, the deformation boxes and the recorded tip positions: :func:`plot_databases`;
+* Fig. 4, learning curves of training runs: :func:`plot_learning_curves`;
+* Fig. 5, an agent deforming the rod to a goal outside its training box:
+  :func:`plot_deformation`;
+* an episode's first and last frames, and all of them as a GIF: :func:`plot_episode_frames`,
+  :func:`save_gif` (``dlo-course demo``);
+* the pieces: :func:`plot_rod`, :func:`draw_box`.
+
+The figures made here are :class:`matplotlib.figure.Figure` objects outside pyplot (except
+Fig. 3's, kept on pyplot for the lessons that show it): nothing needs a display or a backend
+switch, and nothing has to be closed.
+"""
 
 from __future__ import annotations
 
+import json
 from itertools import product
 from pathlib import Path
+from typing import Any, Sequence
 
 import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
 
 from dlo_course.database import BOXES, Box, load_database
+from dlo_course.evaluation import load_actor, play_episode
+from dlo_course.mesh import N_RINGS, node_of_ring, selected_nodes
+from dlo_course.rundir import CONFIG_FILE, read_progress
 
 
 def _box_edges(low: np.ndarray, high: np.ndarray):
@@ -66,11 +87,163 @@ def plot_rod(ax, nodes: np.ndarray, selected=(), goal=None, color="green", label
         selected: indices of the selected nodes P_c.
         goal: (m, 3) desired positions P_d, or None.
     """
-    from dlo_course.mesh import N_RINGS, node_of_ring
-
     line = nodes[[node_of_ring(k) for k in range(N_RINGS)]]
     ax.plot(*line.T, color=color, lw=2, label=label)
     if len(selected):
         ax.scatter(*nodes[list(selected)].T, marker="x", color="blue", s=50)
     if goal is not None:
         ax.scatter(*np.asarray(goal).T, marker="x", color="red", s=50)
+
+
+# --- Fig. 4: learning curves ---
+
+
+def run_label(run_dir: str | Path) -> str:
+    """A legend label: the directory's name and, from its ``config.json``, e.g.
+    "paper_n2 (DLOShape-v0, n_nodes=2, 32 agents)"."""
+    try:
+        info: dict[str, Any] = json.loads((Path(run_dir) / CONFIG_FILE).read_text())
+    except (OSError, ValueError):
+        return Path(run_dir).name
+    config = info["config"]
+    kwargs = ", ".join(f"{k}={v}" for k, v in config.get("env_kwargs", {}).items())
+    agents = info.get("n_agents", 1)
+    details = ", ".join(p for p in (config["env_id"], kwargs,
+                                    f"{agents} agent{'s' if agents != 1 else ''}") if p)
+    return f"{Path(run_dir).name} ({details})"
+
+
+def plot_learning_curves(run_dirs: Sequence[str | Path], out: str | Path | None = None,
+                         labels: Sequence[str] | None = None, ax: Axes | None = None) -> Figure:
+    """The paper's Fig. 4: mean episode reward per episode of each run, with its min-max
+    band over the agents (the paper draws the mean, unsmoothed).
+
+    Args:
+        run_dirs: run directories or trained agents (each with a ``progress.csv``).
+        out: image file to write (PNG, PDF, SVG...), or ``None``.
+        labels: legend labels, one per run (default: from each run's configuration).
+        ax: axes to draw into (default: a new figure).
+
+    Returns:
+        The figure.
+    """
+    if labels is not None and len(labels) != len(run_dirs):
+        raise ValueError("give one label per run directory")
+    if ax is None:
+        fig = Figure(figsize=(6.4, 4.0), layout="constrained")
+        ax = fig.subplots()
+    else:
+        fig = ax.figure
+    for i, run_dir in enumerate(run_dirs):
+        p = read_progress(run_dir)
+        label = labels[i] if labels is not None else run_label(run_dir)
+        (line,) = ax.plot(p["episode"], p["reward_mean"], label=label)
+        # With a single agent the band is empty (min = max = mean): nothing to draw.
+        ax.fill_between(p["episode"], p["reward_min"], p["reward_max"], color=line.get_color(),
+                        alpha=0.2, linewidth=0)
+    ax.set_xlabel("episode (per agent)")
+    ax.set_ylabel("episode reward")
+    ax.set_title("mean over agents (line), min to max (band)", fontsize="medium")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.grid(alpha=0.3)
+    ax.legend()
+    _save(fig, out, dpi=150)
+    return fig
+
+
+# --- rendered episodes: Fig. 5 and the demo ---
+
+
+def _show_image(ax: Axes, image: np.ndarray, title: str) -> None:
+    ax.imshow(image)
+    ax.set_title(title)
+    ax.axis("off")
+
+
+def _save(fig: Figure, out: str | Path | None, dpi: int) -> None:
+    if out is not None:
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=dpi)
+
+
+def plot_deformation(agent: str | Path, out: str | Path | None = None, seed: int = 0,
+                     max_steps: int = 30, time_mode: str = "code") -> Figure:
+    """The paper's Fig. 5: a trained agent deforms the rod to a goal of the large database
+    that the sweep recorded with the tip outside the training (small) box.
+
+    Args:
+        agent: a trained agent (:func:`dlo_course.evaluation.load_actor`); its number of
+            nodes is read from its actor.
+        out: image file to write, or ``None``.
+        seed: chooses the goal among those outside the small box.
+        max_steps: at most this many actions.
+        time_mode: the environment's time per action ("code" or "paper").
+
+    Returns:
+        The figure: the rendered start and end, and both rod shapes in 3D with P_c and P_d.
+    """
+    from dlo_course.env import make_env  # imports PyBullet: only when needed
+
+    actor, n_nodes = load_actor(agent)
+    large = load_database("large")
+    goals = large.goals(n_nodes)
+    outside = np.flatnonzero(~BOXES["small"].contains(large.meta["offsets"]))
+    goal_index = int(np.random.default_rng(seed).choice(outside))
+    env = make_env(n_nodes=n_nodes, goals=goals, render_mode="rgb_array", time_mode=time_mode)
+    try:
+        obs, info = env.reset(options={"goal_index": goal_index})
+        start_nodes, start_image = env.unwrapped.scene.node_positions(), env.render()
+        _, steps, info = play_episode(actor, env, obs, max_steps)
+        end_nodes, end_image = env.unwrapped.scene.node_positions(), env.render()
+    finally:
+        env.close()
+
+    fig = Figure(figsize=(14, 4.8))
+    _show_image(fig.add_subplot(1, 3, 1), start_image, "start (blue: P_c, red: P_d)")
+    _show_image(fig.add_subplot(1, 3, 2), end_image,
+                f"after {steps} actions: mean distance {info['distance']:.3f} m")
+    ax = fig.add_subplot(1, 3, 3, projection="3d")
+    plot_rod(ax, start_nodes, color="grey", label="initial shape")
+    plot_rod(ax, end_nodes, selected=list(selected_nodes(n_nodes)), goal=goals[goal_index],
+             label="final shape")
+    # True proportions: a 1.55 m rod bent by tens of centimetres; matplotlib's default cube
+    # stretches the sideways bend until it is unreadable.
+    points = np.concatenate([start_nodes, end_nodes, goals[goal_index]])
+    ax.set_box_aspect(np.maximum(np.ptp(points, axis=0), 0.05))
+    ax.set_title(f"{n_nodes} nodes, large-database goal {goal_index}\n"
+                 f"(outside the training box)")
+    ax.legend(loc="upper left")
+    fig.tight_layout()
+    _save(fig, out, dpi=110)
+    return fig
+
+
+def plot_episode_frames(first: np.ndarray, last: np.ndarray, titles: tuple[str, str],
+                        suptitle: str, out: str | Path | None = None) -> Figure:
+    """An episode's first and last rendered frames, side by side.
+
+    Args:
+        first, last: (H, W, 3) uint8 images (``env.render()``).
+        titles: one title per frame.
+        suptitle: the figure's title.
+        out: image file to write, or ``None``.
+    """
+    fig = Figure(figsize=(10, 3.9))
+    for k, (frame, title) in enumerate(zip((first, last), titles)):
+        _show_image(fig.add_subplot(1, 2, k + 1), frame, title)
+    fig.suptitle(suptitle)
+    fig.tight_layout()
+    _save(fig, out, dpi=100)
+    return fig
+
+
+def save_gif(frames: list[np.ndarray], path: str | Path, fps: int = 10) -> Path:
+    """Write RGB frames (H, W, 3) uint8 as an animated GIF (Pillow ships with matplotlib)."""
+    from PIL import Image  # only here: the one use of Pillow
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    images = [Image.fromarray(f) for f in frames]
+    images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps),
+                   loop=0)
+    return path

@@ -18,15 +18,23 @@ ranks (see :mod:`dlo_course.evaluation`).
 from __future__ import annotations
 
 import csv
-import json
-import shutil
+import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
-import numpy as np
+from tqdm.auto import tqdm
 
-from dlo_course.paths import CHECKPOINT_DIR, DATA_DIR
+from dlo_course import mpi
+from dlo_course.config import DDPGConfig, TrainConfig, preset
+from dlo_course.database import BOXES, load_database
+from dlo_course.evaluation import evaluate_thresholds
+from dlo_course.paths import AGENTS_DIR, DATA_DIR
+from dlo_course.plots import plot_deformation, plot_learning_curves
+# ship_run and training_record: their old home, where tests and notebooks import them.
+from dlo_course.rundir import agent_dir, ship_run, training_record  # noqa: F401
+from dlo_course.trainer import train
+
+checkpoint_dir = agent_dir  # the old name of agent_dir
 
 PAPER_TABLE = DATA_DIR / "paper" / "table1.csv"
 NODES = (2, 4, 6)
@@ -65,19 +73,13 @@ def read_paper_table(path: Path = PAPER_TABLE) -> dict[tuple, dict[str, float]]:
     return table
 
 
-def checkpoint_dir(root: Path, n_nodes: int) -> Path:
-    return Path(root) / f"nodes{n_nodes}"
-
-
 def train_agents(preset_name: str, out: Path, seed: int = 0) -> Path:
-    """Train one agent per node count with a trainer preset; returns the checkpoint root."""
-    from dlo_course import mpi
-    from dlo_course.trainer import preset, train
-
+    """Train one agent per node count with a trainer preset; returns the folder of their run
+    directories (``out/checkpoints/nodes{2,4,6}``), which are trained agents."""
     root = Path(out) / "checkpoints"
     for n in NODES:
         config = preset(preset_name, env_kwargs={"n_nodes": n}, seed=seed,
-                        out_dir=str(checkpoint_dir(root, n)))
+                        out_dir=str(agent_dir(root, n)))
         train(config, resume=True, progress=mpi.is_root())
     return root
 
@@ -97,7 +99,7 @@ def goal_source(database: str, protocol: str) -> str:
     return f"{database}-test" if protocol == "test" else database
 
 
-def evaluate_cells(checkpoints: Path, episodes: int, max_steps: int, seed: int,
+def evaluate_cells(agents: Path, episodes: int, max_steps: int, seed: int,
                    time_mode: str = "code", cells: list[Cell] | None = None,
                    protocol: str = "test") -> list[dict]:
     """Evaluate every cell; on rank 0 returns one dict per cell, elsewhere an empty list.
@@ -105,11 +107,6 @@ def evaluate_cells(checkpoints: Path, episodes: int, max_steps: int, seed: int,
     Cells that differ only by threshold share their episodes when the world is reinitialised
     (:func:`dlo_course.evaluation.evaluate_thresholds`): 12 runs make the 24 cells.
     """
-    from tqdm.auto import tqdm
-
-    from dlo_course import mpi
-    from dlo_course.evaluation import evaluate_thresholds
-
     cells = cells or table1_cells()
     groups: dict[tuple, list[Cell]] = {}
     for cell in cells:
@@ -121,7 +118,7 @@ def evaluate_cells(checkpoints: Path, episodes: int, max_steps: int, seed: int,
                       disable=not mpi.is_root()):
         first = group[0]
         by_threshold = evaluate_thresholds(
-            checkpoint_dir(checkpoints, first.nodes), goal_source(first.database, protocol),
+            agent_dir(agents, first.nodes), goal_source(first.database, protocol),
             [cell.threshold for cell in group], reinitialize=first.reinit == "with",
             episodes=episodes, max_steps=max_steps, seed=seed, n_nodes=first.nodes,
             time_mode=time_mode, show_progress=False)
@@ -195,177 +192,13 @@ def write_table(rows: list[dict], paper: dict, out: Path, name: str = "table1"
     return csv_path, md_path
 
 
-def training_record(checkpoints: Path, n_nodes: int) -> dict:
-    """What an agent's training cost: ranks, episodes, transitions, wall time, seed, commit,
-    and the settings that differ between presets. Read from ``record.json`` if present."""
-    folder = checkpoint_dir(checkpoints, n_nodes)
-    record_file = folder / "record.json"
-    if record_file.is_file():
-        return json.loads(record_file.read_text())
-    return _run_record(folder)
-
-
-def _run_record(folder: Path) -> dict:
-    from dlo_course.learning_curves import read_progress
-    from dlo_course.trainer import TrainConfig
-
-    record: dict[str, Any] = {}
-    config_file = folder / "config.json"
-    if config_file.is_file():
-        config = json.loads(config_file.read_text())
-        # Through the dataclass, so that a run older than an option reads as its default.
-        cfg = TrainConfig.from_dict(config["config"])
-        record.update(ranks=config.get("n_agents"), seed=cfg.seed, reduce=cfg.reduce,
-                      commit=config.get("commit"), steps_per_episode=cfg.steps_per_episode,
-                      updates_per_step=cfg.updates_per_step,
-                      normalize_obs=cfg.ddpg.normalize_obs,
-                      preactivation_l2=cfg.ddpg.preactivation_l2,
-                      noise_sigma=cfg.ddpg.noise_sigma, her_k=cfg.her_k,
-                      reset_between_episodes=cfg.reset_between_episodes,
-                      batch_size=cfg.ddpg.batch_size, buffer_size=cfg.ddpg.buffer_size,
-                      twin_critics=cfg.ddpg.twin_critics, policy_delay=cfg.ddpg.policy_delay,
-                      target_noise=cfg.ddpg.target_noise)
-    try:
-        progress = read_progress(folder)
-    except (FileNotFoundError, ValueError):  # no run yet, or not one episode
-        return record
-    record.update(episodes_per_agent=int(progress["episode"][-1]),
-                  transitions=int(progress["transitions"][-1]),
-                  wall_time_h=float(progress["wall_time"][-1]) / 3600)
-    return record
-
-
-SHIPPED_FILES = ("actor.pt", "critic.pt", "config.json", "progress.csv")
-
-
-def _keep_episodes(path: Path, episodes: int) -> None:
-    """Rewrite a per-episode CSV with only its rows up to ``episodes``."""
-    with open(path, newline="") as f:
-        reader = csv.DictReader(f)
-        rows = [row for row in reader if int(row["episode"]) <= episodes]
-        fields = reader.fieldnames
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
-
-
-def ship_run(run_dir: Path, dest: Path, actor: str = "latest", **extra: Any) -> Path:
-    """Copy a finished run's networks, configuration and learning curve into ``dest`` (e.g.
-    ``data/checkpoints/nodes4``) without its bulky resume checkpoints (replay buffers), and
-    write ``record.json``: what the training cost (:func:`training_record`) plus ``extra``
-    (e.g. ``commit=...`` for runs started before the trainer recorded it).
-
-    Args:
-        actor: "latest" ships the run's last actor; "best" the one that did best on the
-            validation goals (``best_actor.pt``, runs with ``validate_every`` > 0), recorded
-            as ``selected`` in ``record.json``. The cost recorded is the whole run's either way:
-            knowing which actor was best took the training after it too.
-    """
-    run_dir, dest = Path(run_dir), Path(dest)
-    if actor not in ("latest", "best"):
-        raise ValueError(f"actor must be 'latest' or 'best', got {actor!r}")
-    missing = [f for f in SHIPPED_FILES if not (run_dir / f).is_file()]
-    if actor == "best" and not (run_dir / "best_actor.pt").is_file():
-        missing.append("best_actor.pt (train with validate_every > 0)")
-    if missing:
-        raise FileNotFoundError(f"{run_dir} is not a finished run: missing {missing}")
-    dest.mkdir(parents=True, exist_ok=True)
-    for name in SHIPPED_FILES:
-        shutil.copy2(run_dir / name, dest / name)
-    for name in ("validation.csv", "best.json"):
-        if (run_dir / name).is_file():
-            shutil.copy2(run_dir / name, dest / name)
-        elif (dest / name).exists():
-            (dest / name).unlink()  # left from a run shipped here before
-    if actor == "best":
-        shutil.copy2(run_dir / "best_actor.pt", dest / "actor.pt")
-        extra["selected"] = json.loads((run_dir / "best.json").read_text())
-    # A run stopped between checkpoints: its networks are the last checkpoint's, so its
-    # learning curve and record stop there too.
-    latest = run_dir / "checkpoints" / "latest.json"
-    if latest.is_file():
-        done = int(json.loads(latest.read_text())["episodes_done"])
-        if actor == "best":  # a best actor found after the last checkpoint is still real
-            done = max(done, int(extra["selected"]["episode"]))
-        for name in ("progress.csv", "validation.csv"):
-            if (dest / name).is_file():
-                _keep_episodes(dest / name, done)
-    record = {**_run_record(dest), **{k: v for k, v in extra.items() if v is not None}}
-    (dest / "record.json").write_text(json.dumps(record, indent=2) + "\n")
-    return dest
-
-
 def database_protocols() -> str:
     """How each database was recorded, for the report (e.g. "small: authors_sweep, ...")."""
-    from dlo_course.database import BOXES, load_database
-
     return ", ".join(f"{name}: {load_database(name).protocol} protocol" for name in BOXES)
-
-
-def plot_deformation(checkpoints: Path, out: Path, n_nodes: int = 4, seed: int = 0,
-                     max_steps: int = 30, time_mode: str = "code") -> Path:
-    """The paper's Fig. 5: the agent deforms the rod to a goal outside its training box."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from dlo_course.database import BOXES, load_database
-    from dlo_course.env import DLOShapeEnv
-    from dlo_course.evaluation import load_actor, play_episode
-    from dlo_course.mesh import selected_nodes
-    from dlo_course.plots import plot_rod
-
-    actor, n_nodes = load_actor(checkpoint_dir(checkpoints, n_nodes), n_nodes)
-    large = load_database("large")
-    goals = large.goals(n_nodes)
-    # Goals the sweep recorded with the tip outside the training box.
-    outside = np.flatnonzero(~BOXES["small"].contains(large.meta["offsets"]))
-    goal_index = int(np.random.default_rng(seed).choice(outside))
-    env = DLOShapeEnv(n_nodes=n_nodes, goals=goals, render_mode="rgb_array",
-                      time_mode=time_mode)
-    ids = list(selected_nodes(n_nodes))
-    try:
-        obs, info = env.reset(options={"goal_index": goal_index})
-        start_nodes, start_image = env.scene.node_positions(), env.render()
-        _, steps, info = play_episode(actor, env, obs, max_steps)
-        end_nodes, end_image = env.scene.node_positions(), env.render()
-    finally:
-        env.close()
-
-    fig = plt.figure(figsize=(14, 4.8))
-    ax = fig.add_subplot(1, 3, 1)
-    ax.imshow(start_image)
-    ax.set_title("start (blue: P_c, red: P_d)")
-    ax.axis("off")
-    ax = fig.add_subplot(1, 3, 2)
-    ax.imshow(end_image)
-    ax.set_title(f"after {steps} actions: mean distance {info['distance']:.3f} m")
-    ax.axis("off")
-    ax = fig.add_subplot(1, 3, 3, projection="3d")
-    plot_rod(ax, start_nodes, color="grey", label="initial shape")
-    plot_rod(ax, end_nodes, selected=ids, goal=goals[goal_index],
-             label="final shape")
-    # True proportions: a 1.55 m rod bent by tens of centimetres; matplotlib's default cube
-    # stretches the sideways bend until it is unreadable.
-    points = np.concatenate([start_nodes, end_nodes, goals[goal_index]])
-    ax.set_box_aspect(np.maximum(np.ptp(points, axis=0), 0.05))
-    ax.set_title(f"{n_nodes} nodes, large-database goal {goal_index}\n"
-                 f"(outside the training box)")
-    ax.legend(loc="upper left")
-    fig.tight_layout()
-    path = Path(out) / "fig5_deformation.png"
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
 
 
 def course_options(record: dict) -> str:
     """The course options a training used, in words ("none" for the paper's DDPG)."""
-    from dlo_course.ddpg import DDPGConfig
-    from dlo_course.trainer import TrainConfig
-
     paper, paper_updates = DDPGConfig(), TrainConfig().updates_per_step
     parts = []
     if record.get("normalize_obs"):
@@ -406,21 +239,18 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
     on rank 0.
 
     Args:
+        checkpoints: the folder of trained agents, ``nodes{2,4,6}`` (:func:`agent_dir`);
+            default the shipped ones.
         whole_database: which cells also get the harder protocol, goals drawn from the whole
             database: "with" (the 12 cells with reinitialisation), "all" or "none".
     """
-    import time
-
-    from dlo_course import mpi
-    from dlo_course.learning_curves import plot_learning_curves
-
     if whole_database not in WHOLE_DATABASE_CELLS:
         raise ValueError(f"whole_database must be one of {sorted(WHOLE_DATABASE_CELLS)}")
     out = Path(out)
     paper = read_paper_table()
     if train_preset is not None:
         checkpoints = train_agents(train_preset, out, seed)
-    checkpoints = Path(checkpoints or CHECKPOINT_DIR)
+    checkpoints = Path(checkpoints or AGENTS_DIR)
     start = time.perf_counter()
     rows = evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode, protocol="test")
     test_minutes = (time.perf_counter() - start) / 60
@@ -440,17 +270,12 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
         tables.append(("## The harder protocol: goals from the whole database", whole_md,
                        f"Goals: {GOAL_PROTOCOLS['whole']}; the paper's numbers are those of "
                        f"its test goals, for comparison. {whole_minutes:.0f} min."))
-    import matplotlib
-
-    matplotlib.use("Agg")
-    runs = [checkpoint_dir(checkpoints, n) for n in NODES]
-    fig = plot_learning_curves(runs, out=out / "fig4_learning_curves.png",
-                               labels=[f"{n} nodes" for n in NODES])
-    import matplotlib.pyplot as plt
-
-    plt.close(fig)
-    fig5 = plot_deformation(checkpoints, out, seed=seed, max_steps=max_steps,
-                            time_mode=time_mode)
+    plot_learning_curves([agent_dir(checkpoints, n) for n in NODES],
+                         out=out / "fig4_learning_curves.png",
+                         labels=[f"{n} nodes" for n in NODES])
+    fig5 = out / "fig5_deformation.png"
+    plot_deformation(agent_dir(checkpoints, 4), fig5, seed=seed, max_steps=max_steps,
+                     time_mode=time_mode)
     records = {n: training_record(checkpoints, n) for n in NODES}
     lines = [
         "# Table I, reproduced",

@@ -20,18 +20,13 @@ An agent whose episode ended early keeps making updates (from its own buffer) un
 slowest agent is done: an all-reduce is collective, so if one rank skipped an update the
 others would wait for it forever.
 
-Rank 0 writes, in ``out_dir``:
-
-* ``config.json``: the configuration, number of agents and library versions;
-* ``progress.csv``: one row per episode (all agents together; see :data:`PROGRESS_COLUMNS`);
-* ``actor.pt``, ``critic.pt``: the latest networks (:func:`dlo_course.ddpg.load_network`;
-  with twin critics, ``critic.pt`` is the first one);
-* ``checkpoints/``: every ``checkpoint_every`` episodes, the full state of the run, so that
-  ``train(config, resume=True)`` continues a killed run and gives the same result as a run
-  that was never interrupted;
-* with ``validate_every`` > 0: ``validation.csv`` (one row per validation, see
-  :data:`VALIDATION_COLUMNS`), and ``best_actor.pt`` with ``best.json``, the actor that did
-  best on the validation goals so far (:func:`validate`).
+Rank 0 writes the run directory ``out_dir`` (its files: :mod:`dlo_course.rundir`):
+``config.json``, ``progress.csv`` (one row per episode, all agents together), ``actor.pt``
+and ``critic.pt`` (the latest networks); every ``checkpoint_every`` episodes the resume
+state under ``checkpoints/``, so that ``train(config, resume=True)`` continues a killed run
+and gives the same result as a run that was never interrupted; and with ``validate_every``
+> 0, ``validation.csv`` and ``best_actor.pt`` with ``best.json``, the actor that did best on
+the validation goals so far (:func:`validate`).
 
 Why validate: an agent's test success is not monotonic in training time (our first 4-node
 recipe run reached 29 of 30 test goals after 60 episodes and 87 of 100 after 300), and the
@@ -42,18 +37,10 @@ goals, so choosing the best actor on them does not peek at the test.
 
 from __future__ import annotations
 
-import copy
-import csv
-import dataclasses
 import functools
-import json
 import math
-import os
-import platform
-import shutil
 import sys
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -62,176 +49,17 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from dlo_course import mpi
-from dlo_course.ddpg import DDPG, DDPGConfig, UpdateRules, save_network
+from dlo_course import mpi, rundir
+# The configurations' old home: notebooks and tests import them from here.
+from dlo_course.config import PRESETS, DDPGConfig, TrainConfig, preset  # noqa: F401
+from dlo_course.database import load_database
+from dlo_course.ddpg import DDPG, UpdateRules
+from dlo_course.evaluation import run_traces
 from dlo_course.her import HindsightRelabeller
 from dlo_course.noise import OUNoise
 from dlo_course.replay_buffer import ReplayBuffer
-
-
-@dataclass
-class TrainConfig:
-    """Everything that defines a training run. Defaults follow the paper, for 2 rod nodes."""
-
-    env_id: str = "DLOShape-v0"
-    """Gymnasium id of the environment; any continuous-control (Box) environment works."""
-    env_kwargs: dict[str, Any] = field(default_factory=lambda: {"n_nodes": 2})
-    """Keyword arguments of ``gymnasium.make`` (for the rod: ``n_nodes`` = 2, 4 or 6)."""
-    episodes: int = 63
-    """Episodes per agent (the paper: 63, i.e. 32 x 63 = 2016 episodes in all)."""
-    steps_per_episode: int = 300
-    """Maximum actions per episode; also passed as ``max_episode_steps`` to the environment."""
-    seed: int = 0
-    """Run seed; each agent's seed is derived from it and its rank (:func:`mpi.rank_seed`)."""
-    out_dir: str = "runs/train"
-    """Directory of the run's files."""
-    checkpoint_every: int = 10
-    """Save the full training state every this many episodes (and after the last one)."""
-    reduce: str = "sum"
-    """How gradients are combined over agents: ``"sum"`` (the paper) or ``"mean"``."""
-    warmup: int | None = None
-    """Updates start once every agent's buffer holds this many transitions
-    (``None``: one batch, as in the paper and the authors' code)."""
-    expected_agents: int | None = None
-    """Number of MPI ranks the preset is meant for; a different number only gives a warning."""
-    updates_per_step: int = 1
-    """DDPG updates per environment step (the paper and the authors' code: 1). More reuse
-    each costly simulator transition; an update costs a few ms, a rod step ~110 ms."""
-    her_k: int = 0
-    """Hindsight relabelling (HER, "future" strategy; :mod:`dlo_course.her`): at the end of
-    each episode, store every transition again this many times, each time with a goal the
-    rod reached later in that episode (0: off, as in the paper; the HER paper: 4). Needs a
-    goal-reaching environment such as ``DLOShape-v0``. A trainer option rather than a DDPG
-    one: it changes what is stored, and only the trainer knows episodes and the environment's
-    observation layout and threshold; the DDPG update never sees the difference."""
-    reset_between_episodes: bool = True
-    """True: rebuild the world before every training episode (the paper's text). False: a
-    training episode starts from the shape the previous one ended in and only a new goal is
-    drawn (the authors' code). The first episode, and any after a simulation blow-up, start
-    from a rebuilt world anyway. False needs ``DLOShape-v0``, whose reset can keep the shape."""
-    validate_every: int = 0
-    """Every this many episodes, run the deterministic actor on ``validation_goals`` held-out
-    goals (:func:`validate`) and keep the best actor in ``best_actor.pt`` (0: never, as in
-    the paper). Costs about 6 s per goal (a rebuilt world and up to ``validation_steps``
-    actions), shared by the ranks."""
-    validation_goals: int = 30
-    """How many validation goals: drawn once from the run's seed among the training goals
-    that are not the paper's test goals (:func:`validation_indices`)."""
-    validation_steps: int = 30
-    """At most this many actions per validation episode (Table I's 30)."""
-    torch_threads: int = 1
-    """PyTorch threads per process. One: the ranks already fill the cores, and more threads
-    per rank would fight over them."""
-    ddpg: DDPGConfig = field(default_factory=DDPGConfig)
-    """DDPG hyperparameters (networks, learning rates, buffer, noise)."""
-
-    def __post_init__(self) -> None:
-        if isinstance(self.ddpg, dict):  # read back from config.json
-            self.ddpg = DDPGConfig(**self.ddpg)
-        self.env_kwargs = dict(self.env_kwargs)
-        if self.episodes < 1:
-            raise ValueError(f"episodes must be at least 1, got {self.episodes}")
-        if self.steps_per_episode < 1:
-            raise ValueError(f"steps_per_episode must be at least 1, got {self.steps_per_episode}")
-        if self.checkpoint_every < 1:
-            raise ValueError(f"checkpoint_every must be at least 1, got {self.checkpoint_every}")
-        if self.reduce not in ("sum", "mean"):
-            raise ValueError(f"reduce must be 'sum' or 'mean', got {self.reduce!r}")
-        if self.updates_per_step < 1:
-            raise ValueError(f"updates_per_step must be at least 1, got {self.updates_per_step}")
-        if self.her_k < 0:
-            raise ValueError(f"her_k must be >= 0 (0: no hindsight relabelling), got {self.her_k}")
-        if self.validate_every < 0:
-            raise ValueError(f"validate_every must be >= 0 (0: no validation), "
-                             f"got {self.validate_every}")
-        if self.validation_goals < 1 or self.validation_steps < 1:
-            raise ValueError("validation_goals and validation_steps must be at least 1, got "
-                             f"{self.validation_goals} and {self.validation_steps}")
-        if self.warmup is not None and self.warmup < 1:
-            raise ValueError(f"warmup must be at least 1, got {self.warmup}")
-        if "max_episode_steps" in self.env_kwargs:
-            raise ValueError("set steps_per_episode, not env_kwargs['max_episode_steps']")
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
-        return cls(**d)
-
-
-PRESETS: dict[str, TrainConfig] = {
-    # Seconds of learning code on top of ~40 simulator steps per agent: for CI and notebooks.
-    # The batch is small so that updates do happen within 2 x 20 steps.
-    "smoke": TrainConfig(episodes=2, steps_per_episode=20, checkpoint_every=1,
-                         out_dir="runs/smoke", ddpg=DDPGConfig(batch_size=16)),
-    # About an hour on a 4-core laptop at ~5 simulator actions per second per core.
-    "laptop": TrainConfig(episodes=60, steps_per_episode=150, checkpoint_every=5,
-                          out_dir="runs/laptop", expected_agents=4),
-    # The paper: 32 agents x 63 episodes x 300 steps, gradients summed.
-    "paper": TrainConfig(episodes=63, steps_per_episode=300, checkpoint_every=7,
-                         out_dir="runs/paper", expected_agents=32, reduce="sum"),
-    # What 2 cores can train in about an hour (~16 rod transitions/s): the paper's DDPG with
-    # four course options that make a small budget go further (docs/design.md, "Training on
-    # two cores"): fixed input scaling, a penalty on the saturated actor, shorter episodes
-    # (more goals per transition; test episodes are 30 steps) and 2 updates per step.
-    "course": TrainConfig(episodes=240, steps_per_episode=60, checkpoint_every=10,
-                          out_dir="runs/course", expected_agents=2, updates_per_step=2,
-                          ddpg=DDPGConfig(normalize_obs=True, preactivation_l2=0.01,
-                                          noise_sigma=0.15)),
-    # PROVISIONAL, a first guess to be tuned by the ablation of issue 12: the course preset's
-    # options on the 4-node task, plus every training lever at once (docs/design.md,
-    # "Training levers"): hindsight relabelling, TD3's three fixes, episodes that keep the
-    # rod's shape (the authors' code), bigger batches and buffer. 30 000 rod transitions per
-    # agent: at ~16 transitions/s on 2 cores, about an hour of simulation plus the updates.
-    "recipe": TrainConfig(env_kwargs={"n_nodes": 4}, episodes=500, steps_per_episode=60,
-                          checkpoint_every=10, out_dir="runs/recipe", expected_agents=2,
-                          updates_per_step=2, her_k=4, reset_between_episodes=False,
-                          validate_every=20, validation_goals=30,
-                          ddpg=DDPGConfig(normalize_obs=True, preactivation_l2=0.01,
-                                          noise_sigma=0.15, batch_size=256,
-                                          buffer_size=200_000, twin_critics=True,
-                                          policy_delay=2, target_noise=0.1,
-                                          target_noise_clip=0.3)),
-}
-
-
-def preset(name: str, **overrides: Any) -> TrainConfig:
-    """A copy of preset ``name`` (a key of :data:`PRESETS`) with some fields changed."""
-    if name not in PRESETS:
-        raise ValueError(f"unknown preset {name!r}; choose one of {', '.join(PRESETS)}")
-    return dataclasses.replace(copy.deepcopy(PRESETS[name]), **overrides)
-
-
-def load_config(run_dir: str | Path) -> TrainConfig:
-    """The :class:`TrainConfig` of a run, read from its ``config.json``."""
-    return TrainConfig.from_dict(json.loads((Path(run_dir) / "config.json").read_text())["config"])
-
-
-PROGRESS_COLUMNS = [
-    "episode",         # 1, 2, ... (each agent has played this many episodes)
-    "transitions",     # environment steps so far, all agents together
-    "updates",         # gradient updates so far (the same on every agent)
-    "wall_time",       # seconds since the run started (only time spent running is counted)
-    "reward_mean",     # episode reward (sum over its steps), mean over agents: Fig. 4
-    "reward_min",      # ... and its min and max over agents
-    "reward_max",
-    "length_mean",     # steps per episode, mean over agents
-    "distance_mean",   # info["distance"] at the end of the episode, mean over agents (m)
-    "success_rate",    # share of agents whose episode ended with info["is_success"]
-    "critic_loss",     # mean over the episode's updates and over agents
-    "policy_loss",
-    "q_mean",
-]
-
-VALIDATION_COLUMNS = [
-    "episode",         # validated after this many episodes per agent
-    "transitions",     # environment steps so far, all agents together
-    "done_rate",       # share of the validation goals reached (mean node distance < threshold)
-    "distance_mean",   # final mean node distance (m), mean over the validation goals
-    "best",            # 1 if this actor became best_actor.pt
-    "seconds",         # wall time the validation took
-]
+from dlo_course.rundir import PROGRESS_COLUMNS, VALIDATION_COLUMNS, format_cell  # noqa: F401
+from dlo_course.rundir import load_config  # noqa: F401  (its old home)
 
 
 # --- one episode of one agent ---
@@ -348,8 +176,6 @@ def validation_indices(env: gymnasium.Env, config: TrainConfig) -> np.ndarray:
     agents had trained towards), so they are removed here: an actor chosen on them would be
     chosen on the test. Other goal sources have no test goals and give plain draws.
     """
-    from dlo_course.database import load_database  # imports nothing heavy, but only if needed
-
     goal_count = len(env.unwrapped.goal_set)
     allowed = np.arange(goal_count)
     source = config.env_kwargs.get("goals", "small")
@@ -380,8 +206,6 @@ def validate(env: gymnasium.Env, actor: torch.nn.Module, goal_indices: np.ndarra
     Returns:
         (done rate, mean final distance in metres) over the V goals.
     """
-    from dlo_course.evaluation import run_traces  # imports PyBullet through the env
-
     threshold = env.unwrapped.threshold
     mine = list(range(mpi.rank(), len(goal_indices), mpi.size()))
     traces = run_traces(actor, env, mine, goal_indices, reinitialize=True, max_steps=max_steps)
@@ -426,120 +250,6 @@ def progress_row(episode: int, counters: dict[str, Any], per_agent: list[dict[st
     }
 
 
-def _format(value: float) -> str:
-    if isinstance(value, int):
-        return str(value)
-    return "" if math.isnan(value) else format(value, ".8g")
-
-
-# --- files ---
-
-
-def _atomic_torch_save(obj: Any, path: Path) -> None:
-    # Write then rename: a run killed while saving leaves the previous file intact.
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(obj, tmp)
-    os.replace(tmp, path)
-
-
-def _write_json(obj: Any, path: Path) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(obj, indent=2) + "\n")
-    os.replace(tmp, path)
-
-
-def _save_checkpoint(out: Path, agent: DDPG, buffer: ReplayBuffer, noise: OUNoise,
-                     relabeller: HindsightRelabeller | None, counters: dict[str, Any],
-                     config: TrainConfig) -> None:
-    """Every rank saves its own state; rank 0 the shared networks and optimisers. The
-    ``latest.json`` pointer moves only once every file is complete."""
-    ckpt_root = out / "checkpoints"
-    name = f"episode{counters['episodes_done']:06d}"
-    ckpt = ckpt_root / name
-    if mpi.is_root():
-        ckpt.mkdir(parents=True, exist_ok=True)
-    mpi.barrier()
-    _atomic_torch_save({"buffer": buffer.state_dict(), "noise": noise.state_dict(),
-                        "her": None if relabeller is None else relabeller.state_dict(),
-                        "torch_rng": torch.get_rng_state()},
-                       ckpt / f"state_rank{mpi.rank()}.pt")
-    if mpi.is_root():
-        _atomic_torch_save({"agent": agent.state_dict(), "counters": dict(counters),
-                            "n_agents": mpi.size(), "config": config.to_dict()},
-                           ckpt / "shared.pt")
-    mpi.barrier()
-    if mpi.is_root():
-        _write_json({"checkpoint": name, **counters}, ckpt_root / "latest.json")
-        for old in ckpt_root.iterdir():
-            if old.is_dir() and old.name != name:
-                shutil.rmtree(old)
-        save_network(agent.actor, out / "actor.pt")
-        save_network(agent.critic, out / "critic.pt")
-
-
-def _save_best(out: Path, agent: DDPG, counters: dict[str, Any]) -> None:
-    """Keep the actor that did best on the validation goals, with when and how well."""
-    tmp = out / "best_actor.pt.tmp"
-    save_network(agent.actor, tmp)
-    os.replace(tmp, out / "best_actor.pt")
-    _write_json({"episode": counters["best_episode"],
-                 "transitions": counters["best_transitions"],
-                 "done_rate": counters["best_done_rate"],
-                 "distance_mean": counters["best_distance"]}, out / "best.json")
-
-
-# Fields that may change when a run is resumed (e.g. to train for more episodes).
-_RESUMABLE_CHANGES = {"episodes", "out_dir", "checkpoint_every", "expected_agents",
-                      "torch_threads", "validate_every"}
-
-
-def _load_checkpoint(out: Path, agent: DDPG, buffer: ReplayBuffer, noise: OUNoise,
-                     relabeller: HindsightRelabeller | None, config: TrainConfig
-                     ) -> dict[str, Any] | None:
-    """Restore the latest checkpoint of ``out`` into this rank's objects; return the counters,
-    or ``None`` if there is no checkpoint."""
-    pointer = out / "checkpoints" / "latest.json"
-    if not pointer.exists():
-        return None
-    ckpt = out / "checkpoints" / json.loads(pointer.read_text())["checkpoint"]
-    # Our own files, holding NumPy arrays and generator states: not weights_only.
-    shared = torch.load(ckpt / "shared.pt", weights_only=False)
-    if shared["n_agents"] != mpi.size():
-        raise ValueError(f"{out} was trained with {shared['n_agents']} agents; resume it with "
-                         f"the same number of MPI ranks (got {mpi.size()})")
-    # Through the dataclass, so that an option added since the checkpoint reads as its
-    # default (off) instead of as a difference.
-    saved, now = TrainConfig.from_dict(shared["config"]).to_dict(), config.to_dict()
-    changed = sorted(k for k in now if k not in _RESUMABLE_CHANGES and saved.get(k) != now[k])
-    if changed:
-        raise ValueError(f"cannot resume {out}: the configuration differs in {changed}")
-    mine = torch.load(ckpt / f"state_rank{mpi.rank()}.pt", weights_only=False)
-    agent.load_state_dict(shared["agent"])
-    buffer.load_state_dict(mine["buffer"])
-    noise.load_state_dict(mine["noise"])
-    if relabeller is not None:
-        relabeller.load_state_dict(mine["her"])
-    torch.set_rng_state(mine["torch_rng"])
-    return dict(shared["counters"])
-
-
-def _open_progress(path: Path, keep_episodes: int, columns: list[str] = PROGRESS_COLUMNS
-                   ) -> tuple[Any, csv.DictWriter]:
-    """Open ``progress.csv`` (or another per-episode CSV with ``columns``) for appending,
-    keeping only the rows of the first ``keep_episodes`` episodes (rows written after the last
-    checkpoint are replayed). Returns the open file and a CSV writer on it."""
-    rows: list[dict[str, str]] = []
-    if keep_episodes > 0 and path.exists():
-        with path.open(newline="") as f:
-            rows = [r for r in csv.DictReader(f) if int(r["episode"]) <= keep_episodes]
-    f = path.open("w", newline="")
-    writer = csv.DictWriter(f, fieldnames=columns)
-    writer.writeheader()
-    writer.writerows(rows)
-    f.flush()
-    return f, writer
-
-
 # --- the run ---
 
 
@@ -555,20 +265,6 @@ def make_env(config: TrainConfig) -> gymnasium.Env:
             env.close()
             raise ValueError(f"DDPG needs a 1-D Box {name} space; {config.env_id} has {space}")
     return env
-
-
-def _git_commit() -> str | None:
-    """The commit of the library's source, if it runs from a git checkout (for the record)."""
-    import subprocess
-
-    try:
-        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, timeout=10, cwd=Path(__file__).parent)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    if out.returncode != 0:
-        return None
-    return out.stdout.strip() or None
 
 
 def observation_reference(env: gymnasium.Env) -> tuple[np.ndarray, np.ndarray]:
@@ -590,7 +286,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
 
     Args:
         config: the run's configuration (see :data:`PRESETS`).
-        resume: continue from the last checkpoint in ``config.out_dir`` (start afresh if
+        resume: continue from the resume state in ``config.out_dir`` (start afresh if
             there is none). ``episodes`` may be raised to train a finished run further.
         progress: show a progress bar (rank 0 only).
         overwrite: allow starting a new run in a directory that already holds one.
@@ -604,7 +300,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
     torch.set_num_threads(config.torch_threads)
     out = Path(config.out_dir)
     n_agents, root = mpi.size(), mpi.is_root()
-    if not resume and not overwrite and (out / "progress.csv").exists():
+    if not resume and not overwrite and (out / rundir.PROGRESS_FILE).exists():
         # Every rank sees the same files, so every rank raises: nobody is left waiting.
         raise FileExistsError(f"{out} already holds a run: resume it (--resume) or choose "
                               "another directory (--out), or pass --overwrite")
@@ -640,26 +336,24 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
 
     counters = {"episodes_done": 0, "transitions": 0, "updates": 0, "elapsed": 0.0}
     if resume:
-        loaded = _load_checkpoint(out, agent, buffer, noise, relabeller, config)
+        loaded = rundir.load_resume_state(out, agent, buffer, noise, relabeller, config)
         if loaded is not None:
             counters = loaded
         elif root:
-            print(f"no checkpoint in {out}: starting from scratch", file=sys.stderr)
-    elif root and (out / "checkpoints").exists():
-        shutil.rmtree(out / "checkpoints")  # overwrite: stale checkpoints must not be resumed
+            print(f"no resume state in {out}: starting from scratch", file=sys.stderr)
+    elif root:
+        rundir.delete_resume_state(out)  # overwrite: a stale resume state must not be resumed
 
     checks = validation_indices(env, config) if config.validate_every else None
     progress_file = validation_file = None
     if root:
         out.mkdir(parents=True, exist_ok=True)
-        _write_json({"config": config.to_dict(), "n_agents": n_agents, "commit": _git_commit(),
-                     "versions": {"python": platform.python_version(), "torch": torch.__version__,
-                                  "gymnasium": gymnasium.__version__, "numpy": np.__version__}},
-                    out / "config.json")
-        progress_file, writer = _open_progress(out / "progress.csv", counters["episodes_done"])
+        rundir.write_config(out, config, n_agents)
+        progress_file, writer = rundir.open_episode_log(out / rundir.PROGRESS_FILE,
+                                                        counters["episodes_done"])
         if checks is not None:
-            validation_file, validation_writer = _open_progress(
-                out / "validation.csv", counters["episodes_done"], VALIDATION_COLUMNS)
+            validation_file, validation_writer = rundir.open_episode_log(
+                out / rundir.VALIDATION_FILE, counters["episodes_done"], VALIDATION_COLUMNS)
 
     reducer = (functools.partial(mpi.allreduce_gradients, op=config.reduce)
                if n_agents > 1 else None)
@@ -677,7 +371,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
             counters["elapsed"] = time.perf_counter() - start
             if root:
                 row = progress_row(episode + 1, counters, per_agent)
-                writer.writerow({k: _format(v) for k, v in row.items()})
+                writer.writerow({k: format_cell(v) for k, v in row.items()})
                 progress_file.flush()
                 bar.set_postfix(reward=f"{row['reward_mean']:.3g}")
                 bar.update(1)
@@ -691,8 +385,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
                                     best_transitions=counters["transitions"])
                 if root:
                     if better:
-                        _save_best(out, agent, counters)
-                    validation_writer.writerow({k: _format(v) for k, v in {
+                        rundir.save_best_actor(out, agent.actor, counters)
+                    validation_writer.writerow({k: format_cell(v) for k, v in {
                         "episode": episode + 1, "transitions": counters["transitions"],
                         "done_rate": done_rate, "distance_mean": distance,
                         "best": int(better), "seconds": time.perf_counter() - began}.items()})
@@ -703,7 +397,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
                 if not mpi.modules_in_sync(agent.actor, *agent.critics):
                     raise RuntimeError("the agents' networks have diverged: the MPI "
                                        "reduction did not give every rank the same bits")
-                _save_checkpoint(out, agent, buffer, noise, relabeller, counters, config)
+                rundir.save_resume_state(out, agent, buffer, noise, relabeller, counters, config)
     finally:
         bar.close()
         env.close()

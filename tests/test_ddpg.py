@@ -81,6 +81,22 @@ def test_act_clips_noisy_actions_to_the_bounds():
     assert agent.act(np.zeros((3, 5))).shape == (3, 2)
 
 
+def test_policy_action_is_numpy_in_numpy_out_without_gradient():
+    from dlo_course.ddpg import policy_action
+
+    agent = DDPG(5, 2, action_low=[-2, -1], action_high=[2, 1], config=SMALL)
+    obs = np.random.default_rng(0).normal(size=(3, 5))  # float64: cast to the networks' float32
+    batch = policy_action(agent.actor, obs)
+    assert isinstance(batch, np.ndarray) and batch.shape == (3, 2) and batch.dtype == np.float32
+    single = policy_action(agent.actor, obs[0])
+    assert single.shape == (2,)  # no batch axis added
+    with torch.no_grad():
+        expected = agent.actor(torch.as_tensor(obs, dtype=torch.float32)).numpy()
+    np.testing.assert_array_equal(batch, expected)
+    # Without noise the agent's action is the policy's, clipped (a no-op inside the bounds).
+    np.testing.assert_array_equal(agent.act(obs[0]), single)
+
+
 def test_targets_start_as_copies():
     agent = DDPG(5, 2, config=SMALL)
     for net, target in ((agent.actor, agent.actor_target), (agent.critic, agent.critic_target)):

@@ -259,8 +259,24 @@ def test_gymnasium_registration_and_time_limit(far_goals):
 
 
 def test_check_env(make_env, far_goals):
-    env = make_env(n_nodes=2, goals=far_goals[:, :2], max_episode_steps=5)
+    env = make_env(n_nodes=2, goals=far_goals[:, :2])
     check_env(env, skip_render_check=True)
+
+
+def test_the_step_limit_is_only_gymnasiums_time_limit(far_goals):
+    from dlo_course.env import make_env as make_wrapped
+
+    with pytest.raises(TypeError):
+        DLOShapeEnv(n_nodes=4, goals=far_goals, max_episode_steps=5)  # no limit of its own
+    env = make_wrapped(max_episode_steps=None, n_nodes=4, goals=far_goals)
+    try:
+        chain = []
+        while env is not env.unwrapped:
+            chain.append(type(env).__name__)
+            env = env.env
+        assert "TimeLimit" not in chain and chain  # Gymnasium's other wrappers are there
+    finally:
+        env.close()
 
 
 def test_two_environments_in_one_process_are_independent(make_env, far_goals):

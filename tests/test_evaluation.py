@@ -13,8 +13,8 @@ from dlo_course.ddpg import Actor, Critic, save_network
 from dlo_course.env import DLOShapeEnv
 from dlo_course.simulation import SimParams
 from dlo_course.evaluation import (
-    CheckpointError, EpisodeRecord, EpisodeTrace, evaluate, evaluate_thresholds, goal_schedule,
-    load_actor, run_episodes, summarize, wilson_interval,
+    CheckpointError, EpisodeRecord, EpisodeTrace, TrainedAgentError, evaluate,
+    evaluate_thresholds, goal_schedule, load_actor, run_episodes, summarize, wilson_interval,
 )
 
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
@@ -74,8 +74,9 @@ def goals_2():
                      [[1.10, 0.20, 1.10], [1.15, 0.15, 0.60]]])
 
 
-def test_bad_checkpoints_give_clear_errors(tmp_path, checkpoint):
-    with pytest.raises(CheckpointError, match="no checkpoint"):
+def test_bad_trained_agents_give_clear_errors(tmp_path, checkpoint):
+    assert CheckpointError is TrainedAgentError  # the old name still works
+    with pytest.raises(TrainedAgentError, match="no trained agent"):
         load_actor(tmp_path / "nowhere")
     corrupt = tmp_path / "corrupt"
     corrupt.mkdir()

@@ -69,7 +69,7 @@ def test_reproduce_flag_errors():
     result = runner.invoke(main, ["reproduce", "--train"])
     assert result.exit_code != 0 and "--preset" in result.output
     result = runner.invoke(main, ["reproduce", "--checkpoints", "/nonexistent", "--episodes", "1"])
-    assert result.exit_code != 0 and "no checkpoint" in result.output
+    assert result.exit_code != 0 and "no trained agent" in result.output
 
 
 @pytest.mark.slow
