@@ -16,8 +16,8 @@ Conventions (nbgrader's, kept deliberately small):
   namespace, so it never waits for a simulation or a training run of the notebook.
 * Notebooks are stored without outputs, in Jupyter's own JSON layout (so saving from Jupyter
   and writing from here give the same bytes).
-* Notebooks read ``DLO_COURSE_FAST=1`` (:func:`fast_mode`) to shrink every simulation and
-  training budget to seconds; the tests execute every solution that way.
+* Notebooks read ``DLO_COURSE_FAST=1`` (:func:`dlo_course.notebook.fast_mode`) to shrink every
+  simulation and training budget to seconds; the tests execute every solution that way.
 
 Grading (``dlo-course course grade``) runs ``pytest tests/grading --notebooks DIR`` for each
 student's folder and collects the points of every exercise in a CSV file. The students' code
@@ -59,22 +59,9 @@ _EXERCISE_COMMENT = re.compile(r"^\s*#\s*exercise:\s*([A-Za-z_]\w*)\s*\((\d+)\s*
                                re.IGNORECASE)
 
 
-# --------------------------------------------------------------------------- budgets
-
-
-def fast_mode() -> bool:
-    """True when ``DLO_COURSE_FAST`` is set (to anything but "", "0", "false", "no"):
-    notebooks then shrink episodes, steps and training runs to a few seconds."""
-    return os.environ.get("DLO_COURSE_FAST", "").strip().lower() not in ("", "0", "false", "no")
-
-
-def output_dir(*parts: str) -> Path:
-    """Where notebooks write pictures, GIFs and runs: ``$DLO_COURSE_OUTPUT`` or, by default,
-    ``reports/lessons`` in the repository (ignored by git). Created if missing."""
-    base = Path(os.environ.get("DLO_COURSE_OUTPUT", REPO_ROOT / "reports" / "lessons"))
-    path = base.joinpath(*parts)
-    path.mkdir(parents=True, exist_ok=True)
-    return path
+# The notebooks' helpers live in dlo_course.notebook; re-exported here for notebooks written
+# before it existed (``from dlo_course.course import fast_mode, output_dir``).
+from dlo_course.notebook import fast_mode, output_dir  # noqa: E402,F401
 
 
 # ----------------------------------------------------------------- notebook files
@@ -269,13 +256,15 @@ def release(solutions: str | Path = SOLUTIONS_DIR, lessons: str | Path = LESSONS
 
 # What a student bundle leaves out: the answers (solutions/) and the tests that quote, hold
 # or run answers (the mutation suite quotes the solutions' lines, the calibration tests hold
-# correct RingBuffer and build_mlp answers, the others grade solutions/). The grader
-# (tests/grading) stays, so that students can grade themselves: its references are the
-# library's, which the bundle ships anyway (the lessons import it). The lessons are written
-# afresh from the solutions.
+# correct RingBuffer and build_mlp answers, the others grade solutions/), and the grader's
+# own answers to the exercises the library has no reference for (tests/grading/answers.py),
+# replaced by their probes' results as data (answers.json, :func:`record_answers`). The rest
+# of the grader (tests/grading) stays, so that students can grade themselves: its other
+# references are the library's, which the bundle ships anyway (the lessons import it). The
+# lessons are written afresh from the solutions.
 STUDENT_EXCLUDE = ("solutions/", "lessons/", "tests/test_course.py",
                    "tests/test_grading_attacks.py", "tests/test_grading_calibration.py",
-                   "tests/test_mutations.py")
+                   "tests/test_mutations.py", "tests/grading/answers.py")
 _NEVER_COPY = (".git/", ".venv", "runs/", "reports/", "__pycache__/", ".pytest_cache/",
                ".egg-info/", ".ipynb_checkpoints/")
 
@@ -300,13 +289,72 @@ def _repository_files(repo: Path) -> list[str]:
     return sorted(names)
 
 
-def release_student(dest: str | Path, repo: str | Path = REPO_ROOT,
-                    solutions: str | Path = SOLUTIONS_DIR) -> list[str]:
-    """Write the student bundle: the repository without :data:`STUDENT_EXCLUDE` (no
-    solutions, no test that holds answers), with ``lessons/`` released from ``solutions``.
+GRADING_ANSWERS = "answers.py"  # in the grading tests folder: the grader's own answers
+RECORDED_ANSWERS = "answers.json"  # in a student bundle instead: their probes' results
 
-    ``dest`` must not exist or be empty, and must lie outside ``repo``. Returns the bundle's
-    files (POSIX paths relative to ``dest``).
+
+def _module_from_file(path: str | Path, name: str):
+    """Import a file that is not on sys.path (a grading test file, or the answers)."""
+    import importlib.util
+    import warnings
+
+    module = sys.modules.get(name)
+    if module is not None and getattr(module, "__file__", None) == str(path):
+        return module
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    with warnings.catch_warnings():  # the test files' marks are registered by their conftest
+        warnings.simplefilter("ignore")
+        spec.loader.exec_module(module)
+    sys.modules[name] = module
+    return module
+
+
+def answer_result(tests: str | Path, name: str, probe) -> Any:
+    """``probe(answer)``, the answer being the grader's own ``name`` (``answers.py`` of the
+    grading tests folder ``tests``). In a student bundle, which has no ``answers.py``, the
+    result recorded at release (``answers.json``) instead. Runs in the grader's process."""
+    tests = Path(tests)
+    source = tests / GRADING_ANSWERS
+    if source.is_file():
+        answers = _module_from_file(source, "_dlo_grading_answers")
+        return probe(getattr(answers, name))
+    recorded = tests / RECORDED_ANSWERS
+    if not recorded.is_file():
+        raise FileNotFoundError(f"neither {source} nor {recorded}: the grader cannot check "
+                                f"{name!r}")
+    entry = json.loads(recorded.read_text())[name]
+    if entry["probe"] != probe.__qualname__:
+        raise ValueError(f"{recorded}: {name!r} was recorded for {entry['probe']}, not "
+                         f"{probe.__qualname__}: release the bundle again")
+    return decode_data(entry["value"])
+
+
+def record_answers(tests: str | Path = GRADING_TESTS_DIR) -> dict[str, Any]:
+    """The content of ``answers.json``: for each answer of ``tests/answers.py``
+    (its ``PROBES``), the probe's name and its result on the answer, as plain data."""
+    tests = Path(tests)
+    answers = _module_from_file(tests / GRADING_ANSWERS, "_dlo_grading_answers")
+    recorded = {}
+    for name, (test_file, probe_name) in answers.PROBES.items():
+        module = _module_from_file(tests / test_file, "_dlo_answers_" + Path(test_file).stem)
+        probe = getattr(module, probe_name)
+        recorded[name] = {"probe": probe_name,
+                          "value": encode_data(probe(getattr(answers, name)))}
+    return recorded
+
+
+def release_student(dest: str | Path, repo: str | Path = REPO_ROOT,
+                    solutions: str | Path = SOLUTIONS_DIR,
+                    tests: str | Path = GRADING_TESTS_DIR) -> list[str]:
+    """Write the student bundle: the repository without :data:`STUDENT_EXCLUDE` (no
+    solutions, no test that holds answers), with ``lessons/`` released from ``solutions``
+    and the grader's own answers (``tests/answers.py``, if any) replaced by their recorded
+    results (``answers.json`` beside the bundle's copy of the grading tests).
+
+    ``dest`` must not exist or be empty, and must lie outside ``repo``. ``tests`` is the
+    grading tests folder, inside ``repo``. Returns the bundle's files (POSIX paths relative
+    to ``dest``).
     """
     import shutil
 
@@ -315,14 +363,21 @@ def release_student(dest: str | Path, repo: str | Path = REPO_ROOT,
         raise ValueError(f"the student bundle must be written outside the repository: {dest}")
     if dest.exists() and any(dest.iterdir()):
         raise ValueError(f"{dest} is not empty")
+    tests = Path(tests).resolve()
+    exclude = (*STUDENT_EXCLUDE, (tests / GRADING_ANSWERS).relative_to(repo).as_posix())
     written = []
     for name in _repository_files(repo):
-        if any(name == e or (e.endswith("/") and name.startswith(e)) for e in STUDENT_EXCLUDE):
+        if any(name == e or (e.endswith("/") and name.startswith(e)) for e in exclude):
             continue
         target = dest / name
         target.parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(repo / name, target)
         written.append(name)
+    if (tests / GRADING_ANSWERS).is_file():
+        target = dest / tests.relative_to(repo) / RECORDED_ANSWERS
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(json.dumps(record_answers(tests)) + "\n")
+        written.append(target.relative_to(dest).as_posix())
     written += [f"lessons/{n}" for n in release(solutions, dest / "lessons")]
     lessons_readme = repo / "lessons" / "README.md"
     if lessons_readme.is_file():
@@ -622,7 +677,7 @@ SANDBOX_PRELOAD = (
     "matplotlib.pyplot", "pytest", "dlo_course", "dlo_course.ddpg", "dlo_course.replay_buffer",
     "dlo_course.noise", "dlo_course.env", "dlo_course.simulation", "dlo_course.mesh",
     "dlo_course.database", "dlo_course.evaluation", "dlo_course.trainer", "dlo_course.mpi",
-    "dlo_course.plots", "dlo_course.demo")
+    "dlo_course.plots", "dlo_course.demo", "dlo_course.notebook")
 SANDBOX_MEMORY_MB = float(os.environ.get("DLO_COURSE_GRADING_MEMORY_MB", 3072))
 _RESULT_LIMIT = 64 * 2**20  # bytes of one result, or any file (RLIMIT_FSIZE of the worker)
 
@@ -1030,15 +1085,18 @@ def _worker(request: dict[str, Any], result_fd: int) -> None:
     try:
         probe = _load_probe(request["probe_file"], request["probe"])
         args = decode_data(request["args"])
-        book = ExerciseNotebook.from_path(request["notebook"])
-        try:
-            obj = book.load(request["exercise"], earlier_timeout=request["timeout"] / 10)
-        except ExerciseError as err:
-            response = {"status": "not loaded", "message": str(err)}
+        if request["notebook"] is None:  # a reference run (MPI): the probe uses the library
+            response = {"status": "ok", "value": encode_data(probe(None, *args))}
         else:
-            _poison(request.get("references", ()))
-            value = probe(obj, *args)
-            response = {"status": "ok", "value": encode_data(value)}
+            book = ExerciseNotebook.from_path(request["notebook"])
+            try:
+                obj = book.load(request["exercise"], earlier_timeout=request["timeout"] / 10)
+            except ExerciseError as err:
+                response = {"status": "not loaded", "message": str(err)}
+            else:
+                _poison(request.get("references", ()))
+                value = probe(obj, *args)
+                response = {"status": "ok", "value": encode_data(value)}
     except BaseException as err:  # noqa: BLE001 - anything the student's code raises
         import traceback
 
@@ -1266,10 +1324,158 @@ class Sandbox:
         self.close()
 
 
+# ------------------------------------------------------------ sandboxed MPI ranks
+#
+# An exercise written with mpi4py is graded in real MPI processes. The grader starts
+# ``mpiexec -n N python -c "...mpi_sandbox_rank()" REQUEST`` in a fresh folder: every rank
+# initialises MPI and exchanges a few messages of every size class first (so the connections
+# and shared-memory segments MPI uses exist before the doors close), then restricts itself as
+# a sandbox worker does (:func:`_restrict_worker`, its own scratch folder ``rank<r>/``), runs
+# the probe on the student's object and writes its result as data. The grader, which never
+# imports mpi4py, reads the N results. A rank that hangs (a student's collective that the
+# other rank never joins) is killed with the whole launcher at the time limit.
+
+
+def mpi_sandbox_rank() -> None:
+    """One rank of :func:`run_mpi` (``sys.argv[1]``: the request file)."""
+    import importlib
+
+    request = json.loads(Path(sys.argv[1]).read_text())
+    from mpi4py import MPI
+
+    comm = MPI.COMM_WORLD
+    rank = comm.Get_rank()
+    scratch = os.path.join(request["root"], f"rank{rank}")
+    os.makedirs(scratch, exist_ok=True)
+    log = os.open(os.path.join(scratch, "output.txt"), os.O_WRONLY | os.O_CREAT | os.O_TRUNC,
+                  0o600)
+    os.dup2(log, 1)
+    os.dup2(log, 2)
+    os.close(log)
+    for name in SANDBOX_PRELOAD:
+        try:
+            importlib.import_module(name)
+        except Exception as err:  # noqa: BLE001
+            print(f"sandbox: could not preload {name}: {err}", file=sys.stderr)
+    import numpy as np
+    import torch
+
+    torch.set_num_threads(1)
+    for n in (1, 1024, 1 << 18):  # eager and rendezvous messages, before the restrictions
+        buf = np.ones(n, np.float32)
+        comm.Allreduce(MPI.IN_PLACE, buf)
+        comm.Bcast(buf, root=0)
+    comm.allgather(rank)
+    comm.Barrier()
+    result_fd = os.open(os.path.join(request["root"], f"rank{rank}.json"),
+                        os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    _worker(dict(request, scratch=scratch), result_fd)
+    sys.stdout.flush()
+    sys.stderr.flush()
+
+
+def find_mpiexec() -> Path | None:
+    """The ``mpiexec`` beside this Python (the mpich wheel's), or the first on the PATH."""
+    import shutil
+
+    beside = Path(sys.executable).parent / "mpiexec"
+    if beside.is_file():
+        return beside
+    found = shutil.which("mpiexec")
+    return Path(found) if found else None
+
+
+def run_mpi(notebook: str | Path | None, exercise: str, probe_file: str | Path, probe: str,
+            args: tuple = (), references: Iterable[str] = (), ranks: int = 2,
+            timeout: float = 60.0, memory_mb: float = SANDBOX_MEMORY_MB,
+            startup: float = 120.0) -> list[dict[str, Any]]:
+    """Run ``probe(obj, *args)`` in ``ranks`` sandboxed MPI processes, ``obj`` being what the
+    exercise cell of ``notebook`` defines (``notebook=None``: ``obj`` is None, a reference
+    run of a probe that then uses the library).
+
+    Returns:
+        One dict per rank, as :meth:`Sandbox.run`: ``status``, ``value``, ``message``,
+        ``output``.
+
+    Raises:
+        SandboxError: no ``mpiexec`` (``pip install mpich``, the ``mpi`` extra).
+    """
+    import shutil
+    import signal
+
+    mpiexec = find_mpiexec()
+    if mpiexec is None:
+        raise SandboxError("grading this exercise needs mpiexec: pip install mpich mpi4py")
+    with tempfile.TemporaryDirectory(prefix="dlo-grading-mpi-") as tmp:
+        root = Path(tmp).resolve()
+        copy_path = None
+        if notebook is not None:
+            copy_path = root / Path(notebook).name
+            copy_path.write_bytes(Path(notebook).read_bytes())
+        request = {"root": str(root), "notebook": None if copy_path is None else str(copy_path),
+                   "exercise": exercise, "probe_file": str(Path(probe_file).resolve()),
+                   "probe": probe, "args": encode_data(tuple(args)),
+                   "references": list(references), "timeout": float(timeout),
+                   "memory_mb": float(memory_mb)}
+        (root / "request.json").write_text(json.dumps(request))
+        env = {k: v for k, v in os.environ.items()
+               if not k.startswith(("PMI", "PMIX", "MPI", "OMPI", "HYDRA"))}
+        env.update(MPLBACKEND="Agg", DLO_COURSE_FAST="1", OMP_NUM_THREADS="1",
+                   MKL_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", PYTHONDONTWRITEBYTECODE="1",
+                   MPLCONFIGDIR=str(root / "mpl"), DLO_COURSE_OUTPUT=str(root / "output"))
+        env.pop("PYTHONSTARTUP", None)
+        proc = subprocess.Popen(
+            [str(mpiexec), "-n", str(int(ranks)), sys.executable, "-c",
+             "from dlo_course.course import mpi_sandbox_rank; mpi_sandbox_rank()",
+             str(root / "request.json")],
+            cwd=root, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT, start_new_session=True)
+        timed_out = False
+        try:
+            launcher, _ = proc.communicate(timeout=timeout + startup)
+        except subprocess.TimeoutExpired:
+            timed_out = True
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except OSError:
+                pass
+            launcher, _ = proc.communicate()
+        try:  # a rank left behind by the launcher
+            os.killpg(proc.pid, signal.SIGKILL)
+        except OSError:
+            pass
+        launcher_text = launcher.decode(errors="replace")[-3000:]
+        results = []
+        for rank in range(int(ranks)):
+            log = root / f"rank{rank}" / "output.txt"
+            output = log.read_bytes()[-20_000:].decode(errors="replace") if log.is_file() else ""
+            result: dict[str, Any] = {"status": "error", "value": None, "output": output,
+                                      "message": ""}
+            path = root / f"rank{rank}.json"
+            text = path.read_text() if path.is_file() else ""
+            if text:
+                try:
+                    data = json.loads(text)
+                    result.update(status=str(data["status"]), message=str(data.get("message", "")))
+                    if result["status"] == "ok":
+                        result["value"] = decode_data(data["value"])
+                except (ValueError, KeyError, TypeError, RecursionError) as err:
+                    result.update(status="error", message=f"unreadable result: {err!r:.300}")
+            elif timed_out:
+                result.update(status="timeout", message=f"the exercise ran longer than its "
+                                                        f"time limit ({timeout:g} s)")
+            else:
+                result["message"] = (f"rank {rank} ended without a result (mpiexec exit code "
+                                     f"{proc.returncode})\n{launcher_text}")
+            results.append(result)
+        shutil.rmtree(root, ignore_errors=True)
+    return results
+
+
 # ---------------------------------------------------------------- delegation
 
 LIBRARY = "dlo_course"
-LIBRARY_HELPERS = ("dlo_course.course",)  # fast_mode, output_dir: not answers
+LIBRARY_HELPERS = ("dlo_course.notebook", "dlo_course.course")  # fast_mode, output_dir: no answers
 _DYNAMIC = {"__import__": "__import__", "importlib": "importlib", "eval": "eval",
             "exec": "exec", "compile": "compile", "globals": "globals()"}
 
@@ -1384,4 +1590,4 @@ def delegation_message(name: str, problems: list[str]) -> str:
     return (f"{name}: rejected, the answer is not written in the exercise cell: it "
             f"{'; '.join(problems)}. The dlo_course library holds the reference answers, so "
             f"an exercise cell may not call, subclass or fetch anything of it (its helpers "
-            f"in dlo_course.course excepted): write the code yourself.")
+            f"in dlo_course.notebook excepted): write the code yourself.")

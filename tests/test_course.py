@@ -345,8 +345,39 @@ def test_student_bundle_has_no_solutions_and_no_answers(tmp_path):
         if name.startswith(("tests/", "lessons/")):
             text = (bundle / name).read_text(encoding="utf-8", errors="replace")
             assert not [a for a in answers if a in text], name
+    # the grader's own answers stay behind, their probes' results go instead; no grading
+    # file defines an answer the library lacks
+    assert "tests/grading/answers.py" not in files and "tests/grading/answers.json" in files
+    for name in files:
+        if name.startswith("tests/grading/") and name.endswith(".py"):
+            text = (bundle / name).read_text(encoding="utf-8")
+            for leak in ("def reference_discounted_return", "def reference_sweep",
+                         "def reference_stored_done", "def library_pack",
+                         "q.max(axis=1)[next_state]", "gamma**k * r"):
+                assert leak not in text, (name, leak)
     # refuses to write into the repository or over a folder that holds files
     again = CliRunner().invoke(main, ["course", "release", "--student", str(bundle)])
     assert again.exit_code != 0 and "not empty" in again.output
     inside = CliRunner().invoke(main, ["course", "release", "--student", str(REPO / "bundle")])
     assert inside.exit_code != 0 and "outside the repository" in inside.output
+
+
+def test_students_can_grade_themselves_with_the_bundle(tmp_path):
+    """The bundle's grader, without the grader's own answers, gives the solutions full marks
+    and an unsolved lesson none, on the exercises whose references were recorded."""
+    bundle = tmp_path / "bundle"
+    course.release_student(bundle)
+    recorded = json.loads((bundle / "tests" / "grading" / "answers.json").read_text())
+    out = tmp_path / "grades.json"
+    names = sorted(recorded)
+    for notebooks, expected in ((SOLUTIONS, "all"), (bundle / "lessons", "none")):
+        cmd = course.grading_command(notebooks, bundle / "tests" / "grading", out) + \
+            ["-k", " or ".join(names)]
+        proc = subprocess.run(cmd, cwd=bundle, capture_output=True, text=True, timeout=600,
+                              env=dict(os.environ, DLO_COURSE_FAST="1"))
+        report = json.loads(out.read_text())
+        earned = {e["exercise"]: e["earned"] == e["points"] for e in report["exercises"]
+                  if e["exercise"] in recorded}  # -k pack_gradients also runs unpack_...
+        assert sorted(earned) == names, proc.stdout[-3000:]
+        assert all(earned.values()) if expected == "all" else not any(earned.values()), \
+            proc.stdout[-3000:]

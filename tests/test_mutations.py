@@ -3,10 +3,11 @@ with one mistake a student could make) must score 0, and the solution full marks
 mutants break only an exercise's secondary requirement and must get exactly its partial
 credit.
 
-Round k of the suite grades one copy of the solutions in which every exercise carries its
-k-th mutant, with the real grader in a subprocess. (An exercise that uses an earlier answer,
-like ``relabel`` using ``goal_distance``, gets that answer's mutant too: its own mutant must
-score 0 all the same.)
+Round k of a notebook grades a copy of that solution notebook in which every exercise carries
+its k-th mutant, with the real grader (that notebook's grading test file) in a subprocess, so
+one lesson's mutants run alone: ``pytest tests/test_mutations.py -k 04_ddpg``. (An exercise
+that uses an earlier answer gets that answer's mutant too: its own mutant must score 0 all
+the same.)
 """
 
 from __future__ import annotations
@@ -22,6 +23,23 @@ from dlo_course import course
 
 REPO = Path(__file__).resolve().parents[1]
 SOLUTIONS = REPO / "solutions"
+
+# ddpg_update's critic and actor steps, as the solution writes them (a mutant swaps them)
+_CRITIC_STEP = ("    loss_q = ((agent.critic(obs, act) - q_target) ** 2).mean()\n"
+                "    agent.critic_optimizer.zero_grad()\n    loss_q.backward()\n"
+                "    agent.critic_optimizer.step()\n")
+_ACTOR_STEP = ("    # 3. Actor step on the freshly updated critic; frozen, the critic gets no "
+               "gradient from it.\n    agent.critic.requires_grad_(False)\n"
+               "    loss_pi = -agent.critic(obs, agent.actor(obs)).mean()\n"
+               "    agent.actor_optimizer.zero_grad()\n    loss_pi.backward()\n"
+               "    agent.actor_optimizer.step()\n    agent.critic.requires_grad_(True)\n")
+
+# sum_gradients_over_ranks from the packing to the unpacking
+_ALLREDUCE = ("    flat = torch.cat([p.grad.reshape(-1) for p in params]).numpy()  # (n,) float32\n"
+              "    total = np.empty_like(flat)\n"
+              "    comm.Allreduce(flat, total)  # MPI's default operation is the sum\n"
+              "    offset = 0\n    for p in params:\n        k = p.numel()\n"
+              "        p.grad.copy_(torch.from_numpy(total[offset:offset + k]).view_as(p))\n")
 
 # exercise -> [(the mistake, text of the solution, replaced by[, points expected])]
 MUTANTS: dict[str, list[tuple]] = {
@@ -71,6 +89,16 @@ MUTANTS: dict[str, list[tuple]] = {
         ("swapped Polyak factors", "w_target.mul_(1.0 - tau).add_(w, alpha=tau)",
          "w_target.mul_(tau).add_(w, alpha=1.0 - tau)"),
         ("hard update", "w_target.mul_(1.0 - tau).add_(w, alpha=tau)", "w_target.copy_(w)")],
+    "ddpg_update": [
+        ("critic not frozen during the actor step", "    agent.critic.requires_grad_(False)\n", ""),
+        ("actor step before the critic step", _CRITIC_STEP + "\n" + _ACTOR_STEP,
+         _ACTOR_STEP.split("\n", 1)[1] + "\n" + _CRITIC_STEP),
+        ("Polyak on the actor's target only",
+         "((agent.actor_target, agent.actor), (agent.critic_target, agent.critic))",
+         "((agent.actor_target, agent.actor),)"),
+        ("trained networks, not the targets, in the Bellman target",
+         "agent.critic_target(next_obs, agent.actor_target(next_obs))",
+         "agent.critic(next_obs, agent.actor(next_obs))")],
     "ou_step": [
         ("dt for sqrt(dt)", "sigma * np.sqrt(dt) *", "sigma * dt *"),
         ("drift away from mu", "theta * (mu - x)", "theta * (x - mu)")],
@@ -123,6 +151,13 @@ MUTANTS: dict[str, list[tuple]] = {
     "unpack_gradients": [
         ("includes frozen parameters", "        if not p.requires_grad:\n            continue\n", ""),
         ("never advances the offset", "offset += k", "offset += 0")],
+    "sum_gradients_over_ranks": [
+        ("no reduction", "comm.Allreduce(flat, total)", "total[:] = flat"),
+        ("mean for sum", "comm.Allreduce(flat, total)",
+         "comm.Allreduce(flat, total)\n    total /= comm.Get_size()"),
+        ("reduces the parameters, not the gradients", _ALLREDUCE,
+         _ALLREDUCE.replace("p.grad.reshape(-1)", "p.detach().reshape(-1)")
+         .replace("p.grad.copy_(", "p.data.copy_("))],
     "play_episode": [
         ("stores truncation as done", "buffer.add(obs, action, reward, next_obs, terminated)",
          "buffer.add(obs, action, reward, next_obs, terminated or truncated)"),
@@ -161,7 +196,17 @@ MUTANTS: dict[str, list[tuple]] = {
         ("goal taken from obs, not next_obs", "goals = achieved_next[goal_steps]",
          "goals = obs[:, -2 * width:-width].reshape(len(obs), n_nodes, 3)[goal_steps]")],
 }
-ROUNDS = max(len(m) for m in MUTANTS.values())
+def notebook_exercises() -> dict[str, list[str]]:
+    """Solution notebook stem -> its exercises, in order."""
+    found: dict[str, list[str]] = {}
+    for e in course.exercises(SOLUTIONS):
+        found.setdefault(e["notebook"], []).append(e["exercise"])
+    return found
+
+
+# (notebook stem, round k): one grading run each
+ROUNDS = [(stem, k) for stem, names in notebook_exercises().items()
+          for k in range(max(len(MUTANTS.get(n, ())) for n in names))]
 
 
 def mutate(source: str, old: str, new: str) -> str:
@@ -171,20 +216,21 @@ def mutate(source: str, old: str, new: str) -> str:
     return mutated
 
 
-def mutant_submission(folder: Path, k: int) -> dict[str, tuple]:
-    """The solutions with the k-th mutant of each exercise that has one; returns them."""
+def mutant_notebook(stem: str, folder: Path, k: int) -> dict[str, tuple]:
+    """Write the solution notebook ``stem`` to ``folder`` with the k-th mutant of each of
+    its exercises that has one; return the mutants applied, by exercise."""
     applied = {}
-    folder.mkdir(parents=True)
-    for path in course.notebooks_in(SOLUTIONS):
-        nb = course.read_notebook(path)
-        for cell in nb["cells"]:
-            info = course.exercise_info(cell)
-            if info and len(MUTANTS.get(info["exercise"], ())) > k:
-                mutant = MUTANTS[info["exercise"]][k]
-                source = mutate(course.cell_source(cell), mutant[1], mutant[2])
-                cell["source"] = source.splitlines(keepends=True)
-                applied[info["exercise"]] = mutant
-        course.write_notebook(nb, folder / path.name)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = SOLUTIONS / f"{stem}.ipynb"
+    nb = course.read_notebook(path)
+    for cell in nb["cells"]:
+        info = course.exercise_info(cell)
+        if info and len(MUTANTS.get(info["exercise"], ())) > k:
+            mutant = MUTANTS[info["exercise"]][k]
+            source = mutate(course.cell_source(cell), mutant[1], mutant[2])
+            cell["source"] = source.splitlines(keepends=True)
+            applied[info["exercise"]] = mutant
+    course.write_notebook(nb, folder / path.name)
     return applied
 
 
@@ -196,13 +242,14 @@ def test_every_exercise_has_at_least_two_mutants_scoring_zero():
         assert len(zero) >= 2, name
 
 
-@pytest.mark.parametrize("k", range(ROUNDS))
-def test_mutants_score_zero(k, tmp_path):
-    applied = mutant_submission(tmp_path / "student", k)
+@pytest.mark.parametrize("stem, k", ROUNDS, ids=[f"{stem}-{k}" for stem, k in ROUNDS])
+def test_mutants_score_zero(stem, k, tmp_path):
+    applied = mutant_notebook(stem, tmp_path / "student", k)
     out = tmp_path / "grades.json"
     env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="60")
-    proc = subprocess.run(course.grading_command(tmp_path / "student", json_out=out), cwd=REPO,
-                          env=env, capture_output=True, text=True, timeout=900)
+    tests = course.GRADING_TESTS_DIR / f"test_{stem}.py"
+    proc = subprocess.run(course.grading_command(tmp_path / "student", tests, json_out=out),
+                          cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
     assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     earned = {e["exercise"]: e["earned"] for e in json.loads(out.read_text())["exercises"]}
     wrong = {name: (mutant[0], earned[name]) for name, mutant in applied.items()

@@ -233,6 +233,47 @@ class Student:
         return result["value"]
 
 
+    def run_mpi(self, probe, *args, ranks: int = 2):
+        """``probe(student_object, *args)`` in ``ranks`` real MPI processes (``mpiexec``),
+        each sandboxed like :meth:`run`; returns the list of what it returned, by rank."""
+        return _run_mpi(self.path, self.name, probe, args, ranks, self.references)
+
+
+def _run_mpi(path, name, probe, args, ranks, references):
+    import inspect
+
+    from dlo_course.course import SandboxError, encode_data, run_mpi
+
+    key = ("mpi", str(path), name, inspect.getfile(probe), probe.__qualname__,
+           json.dumps(encode_data(args)), ranks)
+    if key not in _CACHE:
+        try:
+            _CACHE[key] = run_mpi(path, name, inspect.getfile(probe), probe.__qualname__, args,
+                                  references, ranks=ranks, timeout=DEFAULT_TIMEOUT)
+        except SandboxError as err:
+            _CACHE[key] = [{"status": "error", "message": str(err), "output": ""}]
+    values = []
+    for rank, result in enumerate(_CACHE[key]):
+        if result["status"] != "ok":
+            output = result.get("output", "").strip()
+            printed = f"\n--- what rank {rank} printed ---\n{output[-3000:]}" if output else ""
+            who = name or "the reference"
+            pytest.fail(f"{who} (rank {rank}, {result['status']}):\n{result['message']}"
+                        f"{printed}", pytrace=False)
+        values.append(result["value"])
+    return values
+
+
+@pytest.fixture
+def mpi_reference():
+    """``mpi_reference(probe, *args, ranks=2)``: ``probe(None, *args)`` in ``ranks`` MPI
+    processes (the probe then uses the library), by rank, computed once per session."""
+    def run(probe, *args, ranks: int = 2):
+        return _run_mpi(None, "", probe, args, ranks, ())
+
+    return run
+
+
 def load_student(config, notebook: str, name: str, references=()) -> Student:
     """The student's exercise ``name`` of ``notebook``, checked without running it: the cell
     exists and does its own work (no delegation to the library). Fails the test otherwise."""

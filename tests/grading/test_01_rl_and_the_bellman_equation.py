@@ -1,20 +1,22 @@
 """Grading: lesson 1, RL and the Bellman equation (reference: dlo_course.ddpg.bellman_target).
 
 Each ``probe_*`` runs in the sandbox on the student's function (and here on the reference)
-and returns plain results; the tests compare them in the grader's own process.
+and returns plain results; the tests compare them in the grader's own process. The library
+has no discounted return nor Q-iteration: those references are the grader's own answers
+(``answers.py``, kept out of the student bundle, see :func:`dlo_course.course.answer_result`).
 """
+
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 
+from dlo_course.course import answer_result
 from dlo_course.ddpg import bellman_target
 
 pytestmark = pytest.mark.notebook("01_rl_and_the_bellman_equation")
-
-
-def reference_discounted_return(rewards, gamma):
-    return sum(gamma**k * r for k, r in enumerate(rewards))
+GRADING_DIR = Path(__file__).resolve().parent
 
 
 def probe_discounted_return(fn):
@@ -28,7 +30,7 @@ def probe_discounted_return(fn):
 @pytest.mark.exercise("discounted_return", points=1, reference="dlo_course.ddpg.bellman_target")
 def test_discounted_return(student):
     got = student.run(probe_discounted_return)
-    want = probe_discounted_return(reference_discounted_return)
+    want = answer_result(GRADING_DIR, "discounted_return", probe_discounted_return)
     assert got == pytest.approx(want, rel=1e-9, abs=1e-12)
 
 
@@ -60,11 +62,6 @@ def test_bellman_target(student):
     torch.testing.assert_close(terminal, want_terminal)
 
 
-def reference_sweep(q, next_state, reward, done, gamma):
-    best_next = torch.as_tensor(q.max(axis=1)[next_state])
-    return bellman_target(torch.as_tensor(reward), best_next, torch.as_tensor(done), gamma).numpy()
-
-
 def probe_q_iteration_sweep(fn):
     rng = np.random.default_rng(11)
     out = []
@@ -82,7 +79,7 @@ def probe_q_iteration_sweep(fn):
 @pytest.mark.exercise("q_iteration_sweep", points=2, reference="dlo_course.ddpg.bellman_target")
 def test_q_iteration_sweep(student):
     got = student.run(probe_q_iteration_sweep)
-    want = probe_q_iteration_sweep(reference_sweep)
+    want = answer_result(GRADING_DIR, "q_iteration_sweep", probe_q_iteration_sweep)
     for mine, ref in zip(got, want, strict=True):
         assert mine["q"].shape == ref["q"].shape
         np.testing.assert_allclose(mine["q"], ref["q"], rtol=1e-9, atol=1e-12)

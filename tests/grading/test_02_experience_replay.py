@@ -6,19 +6,18 @@ fails them with a probability below 1e-9 (:func:`false_failure_bound`, checked b
 """
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 
+from dlo_course.course import answer_result
 from dlo_course.replay_buffer import ReplayBuffer
 
 pytestmark = pytest.mark.notebook("02_experience_replay")
 
 FIELDS = ("obs", "act", "rew", "next_obs", "done")
-
-
-def reference_stored_done(terminated, truncated):
-    return float(terminated)  # what ReplayBuffer.add and trainer.run_episode store
+GRADING_DIR = Path(__file__).resolve().parent
 
 
 def probe_stored_done(fn):
@@ -28,7 +27,8 @@ def probe_stored_done(fn):
 
 @pytest.mark.exercise("stored_done", points=1, reference="dlo_course.trainer.run_episode")
 def test_stored_done(student):
-    assert student.run(probe_stored_done) == probe_stored_done(reference_stored_done)
+    assert student.run(probe_stored_done) == \
+        answer_result(GRADING_DIR, "stored_done", probe_stored_done)
 
 
 # ------------------------------------------------------------------- RingBuffer

@@ -153,3 +153,96 @@ def test_ou_step(student):
             noise.sample()
             assert x.shape == (size,)
             np.testing.assert_allclose(x, noise.state, rtol=1e-9, atol=1e-12)
+
+
+# ------------------------------------------------------------------- ddpg_update
+
+NETS = ("actor", "critic", "actor_target", "critic_target")
+UPDATES = 3  # consecutive updates: the optimisers' state must carry over too
+
+
+def update_agent():
+    """A small agent of the paper's kind whose targets trail its networks (as after some
+    training), so that using the networks instead of the targets shows."""
+    torch.manual_seed(41)
+    agent = ddpg.DDPG(5, 2, -1.0, 1.0, ddpg.DDPGConfig(hidden_sizes=(16, 16), tau=0.1,
+                                                        gamma=0.9))
+    with torch.no_grad():
+        for net in (agent.actor_target, agent.critic_target):
+            for p in net.parameters():
+                p.add_(0.1 * torch.randn(p.shape))
+    return agent
+
+
+def update_batch(k, size=12):
+    """Batch k: float32 tensors, rew and done of shape (B, 1), a quarter of them terminal."""
+    gen = torch.Generator().manual_seed(40 + k)
+    return {"obs": torch.randn(size, 5, generator=gen),
+            "act": torch.rand(size, 2, generator=gen) * 2 - 1,
+            "rew": torch.randn(size, 1, generator=gen),
+            "next_obs": torch.randn(size, 5, generator=gen),
+            "done": (torch.arange(size) % 4 == 0).float().reshape(size, 1)}
+
+
+def probe_ddpg_update(fn):
+    """After each of UPDATES calls fn(agent, batch): every network's parameters, the
+    gradients left on the critic and the actor, and whether the critic is trainable again."""
+    agent = update_agent()
+    steps = []
+    for k in range(UPDATES):
+        fn(agent, update_batch(k))
+
+        def grads(net):
+            return [None if p.grad is None else p.grad.detach().clone()
+                    for p in net.parameters()]
+
+        steps.append({
+            "nets": {name: [p.detach().clone() for p in getattr(agent, name).parameters()]
+                     for name in NETS},
+            "critic_grads": grads(agent.critic), "actor_grads": grads(agent.actor),
+            "critic_trainable": all(p.requires_grad for p in agent.critic.parameters())})
+    return steps
+
+
+def library_update(agent, batch):
+    agent.update(batch)
+
+
+UPDATE_HINTS = {  # what a difference in each place usually means
+    "critic": "the critic step (its label: r + gamma * Q'(s', mu'(s')) * (1 - d) from the "
+              "target networks, without gradient; the critic steps before the actor)",
+    "critic_grads": "the critic's gradients after the update are not those of its own loss: "
+                    "freeze the critic (requires_grad_(False)) during the actor step",
+    "actor": "the actor step (-mean Q(s, mu(s)) on the critic just updated)",
+    "actor_grads": "the actor's gradients (-mean Q(s, mu(s)), after the critic step)",
+    "actor_target": "the soft update of the actor's target",
+    "critic_target": "the soft update of the critic's target",
+}
+
+
+def assert_tensors_close(mine, ref, what):
+    assert len(mine) == len(ref), f"{what}: {len(mine)} tensors, expected {len(ref)}"
+    for a, b in zip(mine, ref):
+        assert a is not None, f"{what}: a gradient is missing"
+        torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-6, msg=lambda m: f"{what}: {m}")
+
+
+@pytest.mark.exercise("ddpg_update", points=3,
+                      reference=("dlo_course.ddpg.DDPG.update", "dlo_course.ddpg.DDPG.target_value",
+                                 "dlo_course.ddpg.DDPG._step", "dlo_course.ddpg.bellman_target",
+                                 "dlo_course.ddpg.critic_loss", "dlo_course.ddpg.policy_loss",
+                                 "dlo_course.ddpg.polyak_update"))
+def test_ddpg_update(student):
+    got = student.run(probe_ddpg_update)
+    want = probe_ddpg_update(library_update)
+    assert len(got) == UPDATES
+    for k, (mine, ref) in enumerate(zip(got, want, strict=True), start=1):
+        for name in ("critic", "critic_grads", "actor", "actor_grads", "actor_target",
+                     "critic_target"):
+            where = f"after update {k}, {name.replace('_', ' ')}: {UPDATE_HINTS[name]}"
+            if name.endswith("_grads"):
+                assert_tensors_close(mine[name], ref[name], where)
+            else:
+                assert_tensors_close(mine["nets"][name], ref["nets"][name], where)
+        assert mine["critic_trainable"], \
+            f"after update {k} the critic is still frozen: unfreeze it after the actor step"

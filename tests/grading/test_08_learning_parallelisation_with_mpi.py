@@ -1,23 +1,24 @@
 """Grading: lesson 8, parallel learning (reference: dlo_course.mpi.allreduce_gradients).
 
-allreduce_gradients needs several MPI ranks; its single-rank behaviour, packing and
-reduction are reproduced here exactly as it computes them (one flat float32 buffer, summed,
-divided by the number of ranks for the mean).
+allreduce_gradients needs several MPI ranks: the reduction is checked against the sum (or
+mean) computed here, the packing against the grader's own answer (``answers.py``, kept out of
+the student bundle, see :func:`dlo_course.course.answer_result`), and
+``sum_gradients_over_ranks`` in 2 real MPI processes against allreduce_gradients itself.
 """
+
+import os
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 from torch import nn
 
+from dlo_course.course import answer_result
+
 pytestmark = pytest.mark.notebook("08_learning_parallelisation_with_mpi")
-
-
-def library_pack(module):
-    # dlo_course.mpi.allreduce_gradients: trainable parameters in order, None grads as zeros
-    params = [p for p in module.parameters() if p.requires_grad]
-    return torch.cat([(p.grad if p.grad is not None else torch.zeros_like(p)).reshape(-1)
-                      for p in params]).numpy()
+DEFAULT_TIMEOUT = float(os.environ.get("DLO_COURSE_GRADING_TIMEOUT", 60))  # as conftest.py
+GRADING_DIR = Path(__file__).resolve().parent
 
 
 def make_module():
@@ -98,7 +99,7 @@ def probe_pack_gradients(fn):
 @pytest.mark.exercise("pack_gradients", points=1, reference="dlo_course.mpi.allreduce_gradients")
 def test_pack_gradients(student):
     got = student.run(probe_pack_gradients)
-    expected = library_pack(make_module())
+    expected = answer_result(GRADING_DIR, "pack_gradients", probe_pack_gradients)
     assert got.ndim == 1 and got.shape == expected.shape, \
         f"shape {got.shape}, expected {expected.shape}"
     assert got.dtype == np.float32
@@ -134,3 +135,77 @@ def test_unpack_gradients(student):
         np.testing.assert_allclose(grad.numpy(), flat[offset:offset + p.numel()].reshape(p.shape))
         offset += p.numel()
     assert got["frozen_kept"], "frozen parameters must keep their gradient"
+
+
+# ------------------------------------------------- sum_gradients_over_ranks (real MPI)
+
+MPI_RANKS = 2
+MPI_UPDATES = 3
+
+
+def probe_sum_gradients_over_ranks(fn, library=False):
+    """Runs in each of MPI_RANKS sandboxed MPI processes: a small DDPG agent per rank, with
+    different initial weights and data on each, broadcast from rank 0, then MPI_UPDATES
+    updates whose gradients are combined by fn(module, comm) (``library``: by the library's
+    allreduce_gradients(module, "sum") instead). Returns this rank's gradients as applied,
+    in order, and its final networks."""
+    from dlo_course import mpi
+    from dlo_course.ddpg import DDPG, DDPGConfig
+
+    comm = mpi.comm()
+    rank = comm.Get_rank()
+    torch.manual_seed(80 + rank)  # different weights on each rank, until the broadcast
+    agent = DDPG(5, 2, -1.0, 1.0, DDPGConfig(hidden_sizes=(16, 16), tau=0.1))
+    mpi.broadcast_module(agent.actor)
+    mpi.broadcast_module(agent.critic)
+    agent.sync_targets()
+    applied = []
+
+    def reducer(module):
+        if library:
+            mpi.allreduce_gradients(module, op="sum")
+        else:
+            fn(module, comm)
+        applied.append([None if p.grad is None else p.grad.detach().clone()
+                        for p in module.parameters() if p.requires_grad])
+
+    rng = np.random.default_rng(rank)  # different data on each rank
+    for _ in range(MPI_UPDATES):
+        agent.update({"obs": rng.normal(size=(8, 5)), "act": rng.uniform(-1, 1, (8, 2)),
+                      "rew": rng.normal(size=8), "next_obs": rng.normal(size=(8, 5)),
+                      "done": (rng.random(8) < 0.25).astype(float)}, reducer)
+    nets = {name: [t.clone() for t in getattr(agent, name).state_dict().values()]
+            for name in ("actor", "critic", "actor_target", "critic_target")}
+    return {"rank": rank, "size": comm.Get_size(), "applied": applied, "nets": nets}
+
+
+@pytest.mark.timeout(2 * (2 * DEFAULT_TIMEOUT + 120))  # two MPI runs, each may start slowly
+@pytest.mark.exercise("sum_gradients_over_ranks", points=3,
+                      reference="dlo_course.mpi.allreduce_gradients")
+def test_sum_gradients_over_ranks(student, mpi_reference):
+    got = student.run_mpi(probe_sum_gradients_over_ranks, ranks=MPI_RANKS)
+    want = mpi_reference(probe_sum_gradients_over_ranks, True, ranks=MPI_RANKS)
+    assert [r["rank"] for r in got] == list(range(MPI_RANKS))
+    assert all(r["size"] == MPI_RANKS for r in got)
+    first = got[0]["nets"]
+    for rank, mine in enumerate(got[1:], start=1):
+        for name, tensors in mine["nets"].items():
+            assert all(torch.equal(a, b) for a, b in zip(tensors, first[name], strict=True)), \
+                f"after {MPI_UPDATES} updates, rank {rank}'s {name} differs from rank 0's: " \
+                f"every rank must apply the same combined gradient"
+    for rank, (mine, ref) in enumerate(zip(got, want, strict=True)):
+        assert len(mine["applied"]) == len(ref["applied"]), \
+            f"rank {rank}: {len(mine['applied'])} reductions, expected {len(ref['applied'])}"
+        for call, (grads, ref_grads) in enumerate(zip(mine["applied"], ref["applied"])):
+            assert len(grads) == len(ref_grads)
+            for g, r in zip(grads, ref_grads):
+                assert g is not None, f"rank {rank}, reduction {call}: a gradient is missing"
+                torch.testing.assert_close(
+                    g, r, rtol=1e-5, atol=1e-7, msg=lambda m: (
+                        f"rank {rank}, reduction {call}: the gradient applied is not the sum of "
+                        f"the ranks' gradients: {m}"))
+        for name, tensors in mine["nets"].items():
+            for a, b in zip(tensors, ref["nets"][name], strict=True):
+                torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7, msg=lambda m: (
+                    f"rank {rank}: {name} after {MPI_UPDATES} updates differs from the "
+                    f"library's result: {m}"))
