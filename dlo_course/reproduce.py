@@ -18,6 +18,8 @@ ranks (see :mod:`dlo_course.evaluation`).
 from __future__ import annotations
 
 import csv
+import hashlib
+import json
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,11 +29,11 @@ from tqdm.auto import tqdm
 from dlo_course import mpi
 from dlo_course.config import DDPGConfig, TrainConfig, preset
 from dlo_course.database import BOXES, load_database
-from dlo_course.evaluation import evaluate_thresholds
+from dlo_course.evaluation import evaluate_thresholds, load_actor
 from dlo_course.paths import AGENTS_DIR, DATA_DIR
 from dlo_course.plots import plot_deformation, plot_learning_curves
 # ship_run and training_record: their old home, where tests and notebooks import them.
-from dlo_course.rundir import agent_dir, ship_run, training_record  # noqa: F401
+from dlo_course.rundir import agent_dir, ship_run, training_record, write_json  # noqa: F401
 from dlo_course.trainer import train
 
 checkpoint_dir = agent_dir  # the old name of agent_dir
@@ -99,13 +101,29 @@ def goal_source(database: str, protocol: str) -> str:
     return f"{database}-test" if protocol == "test" else database
 
 
+def _run_key(agent: Path, group: list[Cell], protocol: str, episodes: int, max_steps: int,
+             seed: int, time_mode: str) -> str:
+    """A file name for one evaluation run: its setting and a digest of the actor's weights,
+    so that a result is reused only for the same agent, goals and protocol."""
+    first = group[0]
+    digest = hashlib.sha256((agent / "actor.pt").read_bytes()).hexdigest()[:12]
+    thresholds = "-".join(f"{c.threshold:g}" for c in group)
+    return (f"{protocol}_{first.reinit}_n{first.nodes}_{first.database}_t{thresholds}_"
+            f"e{episodes}_s{max_steps}_seed{seed}_{time_mode}_{digest}.json")
+
+
 def evaluate_cells(agents: Path, episodes: int, max_steps: int, seed: int,
                    time_mode: str = "code", cells: list[Cell] | None = None,
-                   protocol: str = "test") -> list[dict]:
+                   protocol: str = "test", cache: Path | None = None) -> list[dict]:
     """Evaluate every cell; on rank 0 returns one dict per cell, elsewhere an empty list.
 
     Cells that differ only by threshold share their episodes when the world is reinitialised
     (:func:`dlo_course.evaluation.evaluate_thresholds`): 12 runs make the 24 cells.
+
+    Args:
+        cache: a folder where each finished run leaves its results (with the minutes it
+            took), reused when the same agent is evaluated the same way again: a stopped
+            reproduction resumes at the run it was in instead of starting over.
     """
     cells = cells or table1_cells()
     groups: dict[tuple, list[Cell]] = {}
@@ -117,16 +135,46 @@ def evaluate_cells(agents: Path, episodes: int, max_steps: int, seed: int,
     for group in tqdm(groups.values(), desc=f"Table I ({protocol} goals)", unit="run",
                       disable=not mpi.is_root()):
         first = group[0]
-        by_threshold = evaluate_thresholds(
-            agent_dir(agents, first.nodes), goal_source(first.database, protocol),
-            [cell.threshold for cell in group], reinitialize=first.reinit == "with",
-            episodes=episodes, max_steps=max_steps, seed=seed, n_nodes=first.nodes,
-            time_mode=time_mode, show_progress=False)
+        agent = agent_dir(agents, first.nodes)
+        saved = None
+        if cache is not None:
+            saved = cache / _run_key(agent, group, protocol, episodes, max_steps, seed,
+                                     time_mode)
+        if saved is not None and saved.is_file():  # every rank sees the same files
+            done = json.loads(saved.read_text())
+        else:
+            began = time.perf_counter()
+            by_threshold = evaluate_thresholds(
+                agent, goal_source(first.database, protocol),
+                [cell.threshold for cell in group], reinitialize=first.reinit == "with",
+                episodes=episodes, max_steps=max_steps, seed=seed, n_nodes=first.nodes,
+                time_mode=time_mode, show_progress=False)
+            done = {"minutes": (time.perf_counter() - began) / 60, "summaries": {
+                f"{t:g}": (s.as_dict() if s is not None else None)
+                for t, (s, _) in by_threshold.items()}}
+            if saved is not None and mpi.is_root():
+                saved.parent.mkdir(parents=True, exist_ok=True)
+                write_json(done, saved)
+            mpi.barrier()
         for cell in group:
-            summary, _ = by_threshold[cell.threshold]
-            if summary is not None:
-                results[cell] = {"cell": cell, **summary.as_dict()}
+            summary = done["summaries"][f"{cell.threshold:g}"]
+            if summary is not None and mpi.is_root():
+                results[cell] = {"cell": cell, **summary, "minutes": done["minutes"],
+                                 "run_cells": len(group)}
     return [results[cell] for cell in cells if cell in results]
+
+
+def evaluation_minutes(rows: list[dict], reinit: str | None = None) -> float:
+    """Minutes the runs behind ``rows`` took (those ``reinit``: "with" or "without", or
+    all), counting a run shared by two cells once, whichever invocation ran it."""
+    return sum(r["minutes"] / r["run_cells"] for r in rows
+               if reinit is None or r["cell"].reinit == reinit)
+
+
+def _time_note(rows: list[dict]) -> str:
+    with_, without = evaluation_minutes(rows, "with"), evaluation_minutes(rows, "without")
+    return (f"{with_ + without:.0f} min of evaluation on {mpi.size()} rank(s): "
+            f"{with_:.0f} with reinitialisation, {without:.0f} without")
 
 
 def verdict(row: dict, paper_done: float) -> str:
@@ -243,6 +291,10 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
             default the shipped ones.
         whole_database: which cells also get the harder protocol, goals drawn from the whole
             database: "with" (the 12 cells with reinitialisation), "all" or "none".
+
+    Every finished evaluation run leaves its results in ``out/runs/``; running the same
+    command again reuses them (for the same agents, episodes and seed), so a reproduction
+    stopped halfway resumes where it was.
     """
     if whole_database not in WHOLE_DATABASE_CELLS:
         raise ValueError(f"whole_database must be one of {sorted(WHOLE_DATABASE_CELLS)}")
@@ -251,25 +303,26 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
     if train_preset is not None:
         checkpoints = train_agents(train_preset, out, seed)
     checkpoints = Path(checkpoints or AGENTS_DIR)
-    start = time.perf_counter()
-    rows = evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode, protocol="test")
-    test_minutes = (time.perf_counter() - start) / 60
+    for n in NODES:  # a missing or wrong agent fails now, not after an hour of evaluation
+        load_actor(agent_dir(checkpoints, n), n)
+    cache = out / "runs"
+    rows = evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode, protocol="test",
+                          cache=cache)
     scope = WHOLE_DATABASE_CELLS[whole_database]
     whole_cells = [c for c in table1_cells() if scope is None or c.reinit == scope]
     whole_rows = (evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode,
-                                 cells=whole_cells, protocol="whole") if whole_cells else [])
-    whole_minutes = (time.perf_counter() - start) / 60 - test_minutes
+                                 cells=whole_cells, protocol="whole", cache=cache)
+                  if whole_cells else [])
     if not mpi.is_root():
         return None
     csv_path, md_path = write_table(rows, paper, out)
     tables = [("## Table I: ours beside the paper's, on the paper's test goals", md_path,
-               f"Goals: {GOAL_PROTOCOLS['test']}. {test_minutes:.0f} min on "
-               f"{mpi.size()} rank(s).")]
+               f"Goals: {GOAL_PROTOCOLS['test']}. {_time_note(rows)}.")]
     if whole_rows:
         _, whole_md = write_table(whole_rows, paper, out, name="table1_whole_database")
         tables.append(("## The harder protocol: goals from the whole database", whole_md,
                        f"Goals: {GOAL_PROTOCOLS['whole']}; the paper's numbers are those of "
-                       f"its test goals, for comparison. {whole_minutes:.0f} min."))
+                       f"its test goals, for comparison. {_time_note(whole_rows)}."))
     plot_learning_curves([agent_dir(checkpoints, n) for n in NODES],
                          out=out / "fig4_learning_curves.png",
                          labels=[f"{n} nodes" for n in NODES])

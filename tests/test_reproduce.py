@@ -125,3 +125,35 @@ def test_ship_run_copies_the_networks_and_writes_the_training_record(tmp_path):
         f.write(lines[-1].replace("2,", "3,", 1) + "\n")  # an episode 3, never checkpointed
     killed = ship_run(run, tmp_path / "killed")
     assert json.loads((killed / "record.json").read_text())["episodes_per_agent"] == 2
+
+
+def test_evaluation_runs_are_kept_and_reused(tmp_path, monkeypatch):
+    """A stopped reproduction resumes: a finished run's results are read back, not re-run,
+    for the same agent and settings; another agent (other weights) is evaluated afresh."""
+    import shutil
+
+    import dlo_course.reproduce as reproduce
+    from dlo_course.paths import AGENTS_DIR
+
+    agents = tmp_path / "agents"
+    shutil.copytree(AGENTS_DIR / "nodes2", agents / "nodes2")
+    cells = [c for c in table1_cells() if (c.nodes, c.database, c.reinit) == (2, "small", "with")]
+    first = reproduce.evaluate_cells(agents, episodes=1, max_steps=2, seed=0, cells=cells,
+                                     cache=tmp_path / "runs")
+    assert [r["cell"] for r in first] == cells and len(list((tmp_path / "runs").iterdir())) == 1
+    assert reproduce.evaluation_minutes(first) == pytest.approx(first[0]["minutes"])
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("a kept run was evaluated again")
+
+    monkeypatch.setattr(reproduce, "evaluate_thresholds", must_not_run)
+    again = reproduce.evaluate_cells(agents, episodes=1, max_steps=2, seed=0, cells=cells,
+                                     cache=tmp_path / "runs")
+    assert [{k: v for k, v in r.items()} for r in again] == first
+    with pytest.raises(AssertionError, match="evaluated again"):  # other episodes: a new run
+        reproduce.evaluate_cells(agents, episodes=2, max_steps=2, seed=0, cells=cells,
+                                 cache=tmp_path / "runs")
+    shutil.copy(AGENTS_DIR / "nodes4" / "actor.pt", agents / "nodes2" / "actor.pt")
+    with pytest.raises(AssertionError, match="evaluated again"):  # other weights: a new run
+        reproduce.evaluate_cells(agents, episodes=1, max_steps=2, seed=0, cells=cells,
+                                 cache=tmp_path / "runs")
