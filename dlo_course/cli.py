@@ -10,13 +10,18 @@ restated here. Heavy modules (torch, pybullet) are imported inside the commands 
 from __future__ import annotations
 
 import dataclasses
+import json
+import re
+import typing
 from pathlib import Path
+from typing import Any, Callable
 
 import click
 
-from dlo_course.config import (PRESET_SUMMARIES, PRESETS, REDUCE_OPS, DDPGConfig, TrainConfig,
-                               paper_default, preset)
-from dlo_course.database import BOXES, GOAL_SOURCES
+from dlo_course.config import (PRESET_SUMMARIES, PRESETS, DDPGConfig, TrainConfig,
+                               config_fields, experiment_config, field_docs, field_types,
+                               paper_default, preset_table, read_toml)
+from dlo_course.database import BOXES, GOAL_SOURCES, DatabaseError
 from dlo_course.mesh import SELECTED_RINGS
 from dlo_course.paths import DATA_DIR
 
@@ -85,7 +90,10 @@ def plot_boxes(out: Path) -> None:
     """Draw both deformation boxes and the recorded tip positions (the paper's Fig. 3)."""
     from dlo_course.plots import plot_databases
 
-    plot_databases(out=out)
+    try:
+        plot_databases(out=out)
+    except (DatabaseError, FileNotFoundError) as err:
+        raise click.ClickException(str(err)) from None
     click.echo(f"wrote {out}")
 
 
@@ -104,7 +112,10 @@ def demo(n_nodes: str, goals: str, steps: int, seed: int, out: Path) -> None:
     """Run one episode with random actions and save pictures of it."""
     from dlo_course.demo import run_demo
 
-    summary = run_demo(n_nodes=int(n_nodes), goals=goals, steps=steps, seed=seed, out=out)
+    try:
+        summary = run_demo(n_nodes=int(n_nodes), goals=goals, steps=steps, seed=seed, out=out)
+    except (DatabaseError, FileNotFoundError) as err:
+        raise click.ClickException(str(err)) from None
     click.echo(summary)
 
 
@@ -147,105 +158,228 @@ def bench_scene(actions: int, block: int, seed: int, switches: bool, knobs: bool
         plane_contact=plane_contact)
 
 
+# --- train's options, generated from the configuration dataclasses ---
+
+# The flags that existed before the options were generated keep their names; every field
+# also has its own, --field-name.
+_FLAG_ALIASES = {"env_id": ["--env"], "out_dir": ["--out"]}
+_BOOL_FLAGS = {"reset_between_episodes": "--reset-between-episodes/--keep-shape"}
+_HELP_DEFAULTS = {"out_dir": "[runs/PRESET_ENV_nNODES_seedSEED]"}
+_HELP_NOTES = {
+    "env_id": "Changing it drops the preset's environment arguments.",
+    "env_kwargs": "A JSON object, e.g. '{\"goals\": \"large\"}', merged into the preset's.",
+    "hidden_sizes": "Comma-separated, e.g. 256,256,256.",
+}
+_CONFIG_PARAMS: dict[str, str | None] = {}
+"""train's generated parameters: field name -> section (None: TrainConfig, "ddpg")."""
+
+
+class _IntList(click.ParamType):
+    """Comma-separated integers, e.g. hidden layer widths."""
+
+    name = "INTS"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> tuple[int, ...]:
+        if isinstance(value, tuple):
+            return value
+        try:
+            return tuple(int(part) for part in str(value).split(","))
+        except ValueError:
+            self.fail(f"{value!r} is not a comma-separated list of integers", param, ctx)
+
+
+class _JsonObject(click.ParamType):
+    """A JSON object, e.g. an environment's keyword arguments."""
+
+    name = "JSON"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> dict[str, Any]:
+        if isinstance(value, dict):
+            return value
+        try:
+            parsed = json.loads(value)
+        except ValueError as err:
+            self.fail(f"{value!r} is not JSON: {err}", param, ctx)
+        if not isinstance(parsed, dict):
+            self.fail(f"{value!r} is not a JSON object ({{...}})", param, ctx)
+        return parsed
+
+
+class _Cleared:
+    """The value of an optional field's option given as 'none': set the field to None (an
+    option's None means that it was not given)."""
+
+    def __repr__(self) -> str:
+        return "none"
+
+
+_CLEARED = _Cleared()
+
+
+class _OrNone(click.ParamType):
+    """An optional field's type: its value, or 'none'."""
+
+    def __init__(self, inner: click.ParamType) -> None:
+        self.inner = inner
+        self.name = f"{inner.name}|none"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        if value is _CLEARED or value == "none":
+            return _CLEARED
+        return self.inner.convert(value, param, ctx)
+
+
+def _range_type(kind: type, bounds: tuple | None) -> click.ParamType:
+    if bounds is None:
+        return click.INT if kind is int else click.FLOAT
+    low, high, low_open = bounds
+    if kind is int:
+        return click.IntRange(min=low, max=high, min_open=low_open)
+    return click.FloatRange(min=low, max=high, min_open=low_open)
+
+
+def _first_sentence(doc: str) -> str:
+    """A field docstring's first sentence, without reStructuredText's markup (the first two
+    for a switch documented as "True: ... False: ...")."""
+    text = re.sub(r":\w+:`~?([^`]+)`", r"\1", " ".join(doc.split())).replace("``", "")
+    sentences = re.split(r"(?<=\.)\s+(?=[A-Z(])", text)
+    return " ".join(sentences[:2] if sentences[0].startswith("True:") else sentences[:1])
+
+
+def _config_option(config_class: type, f: dataclasses.Field) -> Callable:
+    """The click option of one configuration field."""
+    kind = field_types(config_class)[f.name]
+    optional = type(None) in typing.get_args(kind)
+    if optional:
+        kind = next(k for k in typing.get_args(kind) if k is not type(None))
+    flag = "--" + f.name.replace("_", "-")
+    names = _FLAG_ALIASES.get(f.name, []) + [flag]
+    if kind is bool:
+        names = [_BOOL_FLAGS.get(f.name, f"{flag}/--no-{f.name.replace('_', '-')}")]
+        param_type: click.ParamType | None = None
+    elif "choices" in f.metadata:
+        param_type = click.Choice(f.metadata["choices"])
+    elif f.name == "out_dir":
+        param_type = click.Path(file_okay=False)
+    elif kind in (int, float):
+        param_type = _range_type(kind, f.metadata.get("range"))
+    elif typing.get_origin(kind) is tuple:
+        param_type = _IntList()
+    elif typing.get_origin(kind) is dict:
+        param_type = _JsonObject()
+    else:
+        param_type = click.STRING
+    note = _HELP_NOTES.get(f.name, "")
+    if optional and param_type is not None:
+        param_type = _OrNone(param_type)
+        note = "'none' for None."
+    doc = field_docs(config_class).get(f.name, "")
+    default = _HELP_DEFAULTS.get(f.name) or _paper(config_class, f.name)
+    help_text = " ".join(p for p in (_first_sentence(doc), note, default) if p)
+    return click.option(*names, f.name, type=param_type, default=None, help=help_text)
+
+
+def _config_options(command: Callable) -> Callable:
+    """Add an option for every field of TrainConfig and DDPGConfig to ``command``."""
+    options = []
+    for section, config_class in ((None, TrainConfig), ("ddpg", DDPGConfig)):
+        for f in config_fields(config_class):
+            if f.name in _CONFIG_PARAMS:
+                raise RuntimeError(f"two configuration fields are named {f.name!r}: "
+                                   "their options would clash")
+            _CONFIG_PARAMS[f.name] = section
+            options.append(_config_option(config_class, f))
+    for option in reversed(options):  # decorators apply bottom-up
+        command = option(command)
+    return command
+
+
+def _list_presets(ctx: click.Context, param: click.Parameter, value: bool) -> None:
+    if value and not ctx.resilient_parsing:
+        click.echo(preset_table())
+        ctx.exit()
+
+
+def train_config(preset_name: str | None, config_file: Path | None, nodes: int | None,
+                 options: dict[str, Any]) -> tuple[str, TrainConfig]:
+    """The preset's name and the configuration ``dlo-course train`` runs with: the preset,
+    overridden by ``config_file`` (TOML), overridden by ``options`` (train's generated
+    options by field name, None where not given) and ``--nodes``.
+
+    Without an ``out_dir`` from the file or the flags, the run directory is
+    ``runs/PRESET_ENV_nNODES_seedSEED``. Raises ``ValueError`` with what is wrong."""
+    flags: dict[str, Any] = {}
+    for field_name, value in options.items():
+        if value is None:
+            continue
+        value = None if value is _CLEARED else value
+        section = _CONFIG_PARAMS[field_name]
+        (flags.setdefault(section, {}) if section else flags)[field_name] = value
+    if nodes is not None:
+        flags["env_kwargs"] = {**flags.get("env_kwargs", {}), "n_nodes": nodes}
+    file_settings = read_toml(config_file) if config_file is not None else {}
+    name, config, given = experiment_config(preset_name, file_settings, flags,
+                                            file_label=str(config_file))
+    if "out_dir" not in given:
+        nodes_part = f"_n{config.env_kwargs['n_nodes']}" if "n_nodes" in config.env_kwargs \
+            else ""
+        config = dataclasses.replace(config, out_dir=str(
+            Path("runs") / f"{name}_{config.env_id}{nodes_part}_seed{config.seed}"))
+    return name, config
+
+
 # --- learning: train / plot (DDPG + MPI trainer) ---
 
 
 @main.command()
-@click.option("--preset", "preset_name", type=PRESET_NAMES,
-              default="smoke", show_default=True,
+@click.option("--preset", "preset_name", type=PRESET_NAMES, default=None,
               help="Starting configuration: " + "; ".join(
                   f"{name} ({summary})" for name, summary in PRESET_SUMMARIES.items())
-              + ". The flags below override it.")
-@click.option("--env", "env_id", default=None,
-              help="Gymnasium id of any continuous-control environment "
-                   f"{_paper(TrainConfig, 'env_id')}. Changing it drops the preset's "
-                   "environment arguments.")
+              + ". --config and the flags below override it. [the file's preset, else smoke]")
+@click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False,
+                                                         path_type=Path), default=None,
+              help="A TOML file of settings named as in config.json (a [ddpg] table for "
+                   "the DDPG ones, an [env_kwargs] table, and preset = \"NAME\" for the "
+                   "preset). It overrides the preset; the flags override it.")
+@click.option("--list-presets", is_flag=True, expose_value=False, is_eager=True,
+              callback=_list_presets, help="Print the presets with their summaries and exit.")
 @click.option("--nodes", type=click.IntRange(min=1), default=None,
-              help=f"Rod nodes to control ({', '.join(map(str, SELECTED_RINGS))}) [preset; "
-                   f"the paper: {paper_default(TrainConfig, 'env_kwargs')['n_nodes']}].")
-@click.option("--episodes", type=click.IntRange(min=1), default=None,
-              help="Episodes per agent [preset].")
-@click.option("--steps-per-episode", type=click.IntRange(min=1), default=None,
-              help="Maximum actions per episode [preset].")
-@click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Run directory [runs/PRESET_ENV_nNODES_seedSEED].")
+              help=f"Rod nodes to control ({', '.join(map(str, SELECTED_RINGS))}): "
+                   "env_kwargs' n_nodes [preset; the paper: "
+                   f"{paper_default(TrainConfig, 'env_kwargs')['n_nodes']}].")
+@_config_options
 @click.option("--resume", is_flag=True, help="Continue the run in --out from its resume state.")
 @click.option("--overwrite", is_flag=True, help="Start afresh even if --out holds a run.")
-@click.option("--reduce", type=click.Choice(REDUCE_OPS), default=None,
-              help=f"How to combine the agents' gradients {_paper(TrainConfig, 'reduce')}.")
-@click.option("--checkpoint-every", type=click.IntRange(min=1), default=None,
-              help="Episodes between two saves of the resume state [preset].")
-@click.option("--batch-size", type=click.IntRange(min=1), default=None,
-              help=f"Transitions per DDPG update {_paper(DDPGConfig, 'batch_size')}.")
-@click.option("--updates-per-step", type=click.IntRange(min=1), default=None,
-              help="DDPG updates per environment step "
-                   f"{_paper(TrainConfig, 'updates_per_step')}.")
-@click.option("--her-k", type=click.IntRange(min=0), default=None,
-              help="Hindsight relabelling: copies of each transition with goals reached later "
-                   f"in its episode (0: off) {_paper(TrainConfig, 'her_k')}.")
-@click.option("--twin-critics/--no-twin-critics", default=None,
-              help="TD3's clipped double Q: two critics, the target from the smaller "
-                   f"{_paper(DDPGConfig, 'twin_critics')}.")
-@click.option("--policy-delay", type=click.IntRange(min=1), default=None,
-              help="TD3: update the actor and the targets every this many critic updates "
-                   f"{_paper(DDPGConfig, 'policy_delay')}.")
-@click.option("--target-noise", type=click.FloatRange(min=0), default=None,
-              help="TD3's target policy smoothing: noise std in normalised action units "
-                   f"(0: off) {_paper(DDPGConfig, 'target_noise')}.")
-@click.option("--target-noise-clip", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Clip of that noise, in the same units "
-                   f"[preset; default {paper_default(DDPGConfig, 'target_noise_clip')}].")
-@click.option("--reset-between-episodes/--keep-shape", default=None,
-              help="Rebuild the world before every training episode (the paper's text), or "
-                   "start each from the shape the last one ended in (the authors' code) "
-                   f"{_paper(TrainConfig, 'reset_between_episodes')}.")
-@click.option("--validate-every", type=click.IntRange(min=0), default=None,
-              help="Every this many episodes, test the actor on held-out goals (not the "
-                   "paper's test goals) and keep the best one in best_actor.pt (0: off) "
-                   f"{_paper(TrainConfig, 'validate_every')}.")
-@click.option("--validation-goals", type=click.IntRange(min=1), default=None,
-              help="Number of those held-out goals "
-                   f"[preset; default {paper_default(TrainConfig, 'validation_goals')}].")
+@click.option("--print-config", is_flag=True,
+              help="Print the configuration these options give, as JSON, and exit.")
+@click.option("--tensorboard", is_flag=True,
+              help="Also write progress.csv's scalars (and validation's) for TensorBoard, in "
+                   "RUN/tensorboard (needs the tensorboard package: the tensorboard extra).")
 @click.option("--progress/--no-progress", default=True, show_default=True,
               help="Progress bar (rank 0).")
-def train(preset_name: str, env_id: str | None, nodes: int | None, episodes: int | None,
-          steps_per_episode: int | None, seed: int, out: Path | None, resume: bool,
-          overwrite: bool, reduce: str | None, checkpoint_every: int | None,
-          batch_size: int | None, updates_per_step: int | None, her_k: int | None,
-          twin_critics: bool | None, policy_delay: int | None, target_noise: float | None,
-          target_noise_clip: float | None, reset_between_episodes: bool | None,
-          validate_every: int | None, validation_goals: int | None, progress: bool) -> None:
-    """Train DDPG agents; run under `mpiexec -n N` for N parallel agents (the paper: 32)."""
-    from dlo_course import mpi
-    from dlo_course.trainer import train as run_training
+def train(preset_name: str | None, config_file: Path | None, nodes: int | None, resume: bool,
+          overwrite: bool, print_config: bool, tensorboard: bool, progress: bool,
+          **settings: Any) -> None:
+    """Train DDPG agents; run under `mpiexec -n N` for N parallel agents (the paper: 32).
 
-    base = preset(preset_name)
-    # A different environment does not take the rod's arguments (n_nodes...).
-    env_kwargs = dict(base.env_kwargs) if env_id in (None, base.env_id) else {}
-    if nodes is not None:
-        env_kwargs["n_nodes"] = nodes
-    overrides = {name: value for name, value in [
-        ("env_id", env_id), ("episodes", episodes), ("steps_per_episode", steps_per_episode),
-        ("reduce", reduce), ("checkpoint_every", checkpoint_every),
-        ("updates_per_step", updates_per_step), ("her_k", her_k),
-        ("reset_between_episodes", reset_between_episodes),
-        ("validate_every", validate_every), ("validation_goals", validation_goals)]
-        if value is not None}
-    ddpg_overrides = {name: value for name, value in [
-        ("batch_size", batch_size), ("twin_critics", twin_critics),
-        ("policy_delay", policy_delay), ("target_noise", target_noise),
-        ("target_noise_clip", target_noise_clip)] if value is not None}
-    if out is None:
-        nodes_part = f"_n{env_kwargs['n_nodes']}" if "n_nodes" in env_kwargs else ""
-        out = Path("runs") / f"{preset_name}_{env_id or base.env_id}{nodes_part}_seed{seed}"
+    Every field of the configuration has an option (help: its docstring's first sentence).
+    Precedence: flags, then --config, then --preset."""
     try:
-        if ddpg_overrides:
-            overrides["ddpg"] = dataclasses.replace(base.ddpg, **ddpg_overrides)
-        config = preset(preset_name, env_kwargs=env_kwargs, seed=seed, out_dir=str(out),
-                        **overrides)
-        run_dir = run_training(config, resume=resume, progress=progress, overwrite=overwrite)
-    except (ValueError, FileExistsError) as err:
+        name, config = train_config(preset_name, config_file, nodes, settings)
+    except ValueError as err:
+        raise click.UsageError(str(err)) from None
+    if print_config:
+        click.echo(json.dumps({"preset": name, "config": config.to_dict()}, indent=2))
+        return
+
+    from dlo_course import mpi
+    from dlo_course.trainer import TensorBoardLogger, train as run_training
+
+    try:
+        loggers = [TensorBoardLogger()] if tensorboard else []
+        run_dir = run_training(config, resume=resume, progress=progress, overwrite=overwrite,
+                               loggers=loggers)
+    except (ValueError, FileExistsError, ImportError) as err:
         raise click.ClickException(str(err)) from err
     if mpi.is_root():
         click.echo(f"trained {mpi.size()} agent(s); results in {run_dir}")
@@ -276,13 +410,22 @@ def ship(run_dir: Path, dest: Path, actor: str) -> None:
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               default=Path("reports/learning_curves.png"), show_default=True)
 @click.option("--label", "labels", multiple=True,
-              help="Legend label, once per run directory, in order [from each run's config].")
-def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...]) -> None:
+              help="Legend label, once per run directory (per group of seeds with "
+                   "--aggregate-seeds), in order [from each run's config].")
+@click.option("--x", "x_axis", type=click.Choice(["episode", "transitions"]),
+              default="episode", show_default=True,
+              help="Draw against episodes per agent, or transitions of all agents.")
+@click.option("--aggregate-seeds", is_flag=True,
+              help="One curve per group of runs that differ only by seed: the mean over the "
+                   "seeds and a band of one standard deviation.")
+def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...], x_axis: str,
+         aggregate_seeds: bool) -> None:
     """Learning curves of training runs, like the paper's Fig. 4."""
     from dlo_course.learning_curves import plot_learning_curves
 
     try:
-        plot_learning_curves(run_dirs, out=out, labels=labels or None)
+        plot_learning_curves(run_dirs, out=out, labels=labels or None, x=x_axis,
+                             aggregate_seeds=aggregate_seeds)
     except (ValueError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from err
     click.echo(f"wrote {out}")
@@ -369,18 +512,24 @@ def course_group() -> None:
               default=None,
               help="Instead, write the student bundle to this new folder: the repository "
                    "with fresh lessons/, without solutions/ and the tests that hold answers.")
+@click.option("--tests", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="With --student: the grading tests folder, inside the "
+                                 "repository [the repository's tests/grading].")
 def course_release(solutions: Path | None, lessons: Path | None, check: bool,
-                   student_dir: Path | None) -> None:
+                   student_dir: Path | None, tests: Path | None) -> None:
     """Write lessons/ from solutions/: solutions replaced by NotImplementedError, no outputs."""
     from dlo_course import course as course_lib
 
     solutions = solutions or course_lib.SOLUTIONS_DIR
     lessons = lessons or course_lib.LESSONS_DIR
+    if tests is not None and student_dir is None:
+        raise click.UsageError("--tests only applies to a student bundle (--student DIR)")
     if student_dir is not None:
         if check or lessons != course_lib.LESSONS_DIR:
             raise click.UsageError("--student writes a whole bundle: no --check or --lessons")
         try:
-            files = course_lib.release_student(student_dir, solutions=solutions)
+            files = course_lib.release_student(student_dir, solutions=solutions,
+                                               tests=tests or course_lib.GRADING_TESTS_DIR)
         except (ValueError, FileNotFoundError) as err:
             raise click.ClickException(str(err)) from err
         click.echo(f"wrote the student bundle to {student_dir}: {len(files)} files, without "
@@ -396,8 +545,10 @@ def course_release(solutions: Path | None, lessons: Path | None, check: bool,
                                        "release`:\n  " + "\n  ".join(result))
         click.echo(f"{lessons} is up to date with {solutions}")
         return
-    n = sum(1 for e in course_lib.exercises(solutions))
-    click.echo(f"wrote {len(result)} notebooks ({n} exercises) to {lessons}")
+    graded = course_lib.exercises(solutions)
+    written = sum(1 for e in graded if e.get("kind") == "text")
+    click.echo(f"wrote {len(result)} notebooks ({len(graded) - written} exercises, {written} "
+               f"written answers) to {lessons}")
 
 
 @course_group.command("grade")
@@ -424,7 +575,9 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
         note = f"  ({row['error']})" if row["error"] else ""
         click.echo(f"{row['student']}: {row['total']:g} / {row['max_total']:g}{note}")
     logs = out.parent / f"{out.stem}_logs"
-    click.echo(f"wrote {out} (the grader's output for each student: {logs})")
+    feedback = out.parent / f"{out.stem}_feedback"
+    click.echo(f"wrote {out} (the grader's output for each student: {logs}; a feedback sheet "
+               f"for each student: {feedback})")
 
 
 @main.command()
@@ -455,6 +608,7 @@ def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_ste
     """Regenerate the paper's Table I and Figs. 4-5 beside the published numbers."""
     from dlo_course.evaluation import TrainedAgentError
     from dlo_course.reproduce import reproduce as run
+    from dlo_course.rundir import RunFileError
 
     smoke = preset_name == "smoke"
     if preset_name is not None and not (retrain or smoke):
@@ -470,7 +624,7 @@ def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_ste
         report = run(out, checkpoints=checkpoints, episodes=episodes, max_steps=max_steps,
                      seed=seed, train_preset=preset_name if (retrain or smoke) else None,
                      time_mode=time_mode, whole_database=whole_database)
-    except (TrainedAgentError, FileNotFoundError) as err:
+    except (TrainedAgentError, DatabaseError, RunFileError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from None
     if report is not None:
         click.echo(f"wrote {report} and the tables and figures beside it")

@@ -255,6 +255,11 @@ def shipped_databases() -> list[str]:
     return sorted(p.stem for p in DATABASE_DIR.glob("*.npz") if not p.stem.startswith("."))
 
 
+class DatabaseError(ValueError):
+    """A deformation database or goal file that cannot be read (truncated, corrupt) or does
+    not hold what it should."""
+
+
 def load_database(name_or_path: str | Path) -> Database:
     """Load a shipped database by name ("small", "large", "small_settled") or a path to a
     ``.npz`` written by :func:`save_database`."""
@@ -273,17 +278,18 @@ def load_database(name_or_path: str | Path) -> Database:
         with np.load(path, allow_pickle=False) as data:
             arrays = {key: data[key] for key in data.files}
     except Exception as err:  # zip and pickle errors have many types
-        raise ValueError(f"{path} is not a readable deformation database: {err}") from err
+        raise DatabaseError(f"{path} is not a readable deformation database (truncated or "
+                            f"corrupt?): {err}") from err
     for key in ("tip", "nodes"):
         if key not in arrays:
-            raise ValueError(f"{path} is malformed: it has no '{key}' array "
-                             f"(found {sorted(arrays)})")
+            raise DatabaseError(f"{path} is malformed: it has no '{key}' array "
+                                f"(found {sorted(arrays)})")
     tip, nodes = arrays.pop("tip"), arrays.pop("nodes")
     if tip.ndim != 2 or tip.shape[1] != 3 or nodes.shape != (len(tip), 200, 3):
-        raise ValueError(f"{path} is malformed: expected tip (N, 3) and nodes (N, 200, 3), "
-                         f"got {tip.shape} and {nodes.shape}")
+        raise DatabaseError(f"{path} is malformed: expected tip (N, 3) and nodes "
+                            f"(N, 200, 3), got {tip.shape} and {nodes.shape}")
     if not (np.all(np.isfinite(tip)) and np.all(np.isfinite(nodes))):
-        raise ValueError(f"{path} is malformed: it holds non-finite positions")
+        raise DatabaseError(f"{path} is malformed: it holds non-finite positions")
     return Database(tip=tip, nodes=nodes, name=path.stem, meta=arrays)
 
 
@@ -343,7 +349,7 @@ def resolve_goals(source: str | Path | np.ndarray, n_nodes: int) -> np.ndarray:
         try:
             array = np.load(path, allow_pickle=False)
         except Exception as err:  # truncated or not an array file
-            raise ValueError(f"{path} is not a readable goal array: {err}") from err
+            raise DatabaseError(f"{path} is not a readable goal array: {err}") from err
         return goal_array(array, n_nodes)
     if path.suffix == ".npz" and path.is_file():
         try:
@@ -351,7 +357,7 @@ def resolve_goals(source: str | Path | np.ndarray, n_nodes: int) -> np.ndarray:
                 goals = (data["goals"] if "goals" in data.files and "nodes" not in data.files
                          else None)
         except Exception as err:  # a truncated zip raises one of many kinds
-            raise ValueError(f"{path} is not a readable goal file: {err}") from err
+            raise DatabaseError(f"{path} is not a readable goal file: {err}") from err
         if goals is not None:
             return goal_array(goals, n_nodes)
     return load_database(source).goals(n_nodes)

@@ -1,7 +1,8 @@
 """Every figure of the course (matplotlib, headless-safe), after the paper's:
 
 * Fig. 3, the deformation boxes and the recorded tip positions: :func:`plot_databases`;
-* Fig. 4, learning curves of training runs: :func:`plot_learning_curves`;
+* Fig. 4, learning curves of training runs: :func:`plot_learning_curves` (and averaged
+  over seeds: :func:`seed_groups`, :func:`seed_curve`);
 * Fig. 5, an agent deforming the rod to a goal outside its training box:
   :func:`plot_deformation`;
 * an episode's first and last frames, and all of them as a GIF: :func:`plot_episode_frames`,
@@ -113,37 +114,107 @@ def run_label(run_dir: str | Path) -> str:
     return f"{Path(run_dir).name} ({details})"
 
 
+X_AXES = {"episode": "episode (per agent)", "transitions": "transitions (all agents)"}
+"""What a learning curve can be drawn against: ``progress.csv`` columns, and their labels."""
+
+SEED_FREE_FIELDS = ("seed", "out_dir", "episodes", "checkpoint_every", "torch_threads",
+                    "expected_agents")
+"""Configuration fields that may differ between runs averaged together (:func:`seed_groups`):
+the seed, and fields that change where and how long a run is kept, not what it learns."""
+
+
+def seed_groups(run_dirs: Sequence[str | Path]) -> list[list[Path]]:
+    """The runs grouped by configuration: runs whose ``config.json`` differ only in
+    :data:`SEED_FREE_FIELDS` (the seed, mainly), with the same number of agents, share a
+    group. Groups and their runs keep the order of ``run_dirs``; a run without a readable
+    configuration is a group of its own."""
+    from dlo_course.config import TrainConfig
+
+    groups: dict[str, list[Path]] = {}
+    for run_dir in map(Path, run_dirs):
+        try:
+            info = json.loads((run_dir / CONFIG_FILE).read_text())
+            # Through the dataclass, so that a run older than an option reads as its default.
+            config = TrainConfig.from_dict(info["config"]).to_dict()
+            key = json.dumps({"config": {k: v for k, v in config.items()
+                                         if k not in SEED_FREE_FIELDS},
+                              "n_agents": info.get("n_agents", 1)}, sort_keys=True)
+        except (OSError, ValueError, TypeError, KeyError):
+            key = f"alone: {run_dir.resolve()}"
+        groups.setdefault(key, []).append(run_dir)
+    return list(groups.values())
+
+
+def seed_curve(progresses: Sequence[dict[str, np.ndarray]], x: str = "episode",
+               points: int = 200) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mean episode reward over seeds: (x grid, mean, standard deviation) over the range of
+    ``x`` that every run covers (each run's mean over its agents, ``reward_mean``).
+
+    Runs make different numbers of transitions per episode, so against ``"transitions"``
+    each run is interpolated onto ``points`` common values; against ``"episode"`` the grid
+    is the episodes themselves. One run gives a standard deviation of 0."""
+    if x not in X_AXES:
+        raise ValueError(f"x must be one of {list(X_AXES)}, got {x!r}")
+    first = max(float(p[x][0]) for p in progresses)
+    last = min(float(p[x][-1]) for p in progresses)
+    if x == "episode":
+        grid = np.arange(first, last + 1)
+    else:
+        grid = np.linspace(first, last, points) if last > first else np.array([first])
+    curves = np.array([np.interp(grid, p[x], p["reward_mean"]) for p in progresses])
+    spread = curves.std(axis=0, ddof=1) if len(curves) > 1 else np.zeros_like(grid)
+    return grid, curves.mean(axis=0), spread
+
+
 def plot_learning_curves(run_dirs: Sequence[str | Path], out: str | Path | None = None,
-                         labels: Sequence[str] | None = None, ax: Axes | None = None) -> Figure:
+                         labels: Sequence[str] | None = None, ax: Axes | None = None,
+                         x: str = "episode", aggregate_seeds: bool = False) -> Figure:
     """The paper's Fig. 4: mean episode reward per episode of each run, with its min-max
     band over the agents (the paper draws the mean, unsmoothed).
 
     Args:
         run_dirs: run directories or trained agents (each with a ``progress.csv``).
         out: image file to write (PNG, PDF, SVG...), or ``None``.
-        labels: legend labels, one per run (default: from each run's configuration).
+        labels: legend labels, one per run (per group of seeds with ``aggregate_seeds``;
+            default: from each run's configuration).
         ax: axes to draw into (default: a new figure).
+        x: "episode" (per agent, as in the paper) or "transitions" (all agents together).
+        aggregate_seeds: one curve per group of runs that differ only by seed
+            (:func:`seed_groups`): the mean over the seeds, with a band of one standard
+            deviation over them (:func:`seed_curve`).
 
     Returns:
         The figure.
     """
-    if labels is not None and len(labels) != len(run_dirs):
-        raise ValueError("give one label per run directory")
+    if x not in X_AXES:
+        raise ValueError(f"x must be one of {list(X_AXES)}, got {x!r}")
+    groups = seed_groups(run_dirs) if aggregate_seeds else [[Path(r)] for r in run_dirs]
+    if labels is not None and len(labels) != len(groups):
+        unit = "group of seeds" if aggregate_seeds else "run directory"
+        raise ValueError(f"give one label per {unit} ({len(groups)}), got {len(labels)}")
     if ax is None:
         fig = Figure(figsize=(6.4, 4.0), layout="constrained")
         ax = fig.subplots()
     else:
         fig = ax.figure
-    for i, run_dir in enumerate(run_dirs):
-        p = read_progress(run_dir)
-        label = labels[i] if labels is not None else run_label(run_dir)
-        (line,) = ax.plot(p["episode"], p["reward_mean"], label=label)
-        # With a single agent the band is empty (min = max = mean): nothing to draw.
-        ax.fill_between(p["episode"], p["reward_min"], p["reward_max"], color=line.get_color(),
-                        alpha=0.2, linewidth=0)
-    ax.set_xlabel("episode (per agent)")
+    for i, group in enumerate(groups):
+        progresses = [read_progress(run_dir) for run_dir in group]
+        if aggregate_seeds:
+            label = labels[i] if labels is not None else \
+                f"{run_label(group[0])}, {len(group)} seed{'s' if len(group) != 1 else ''}"
+            grid, mean, spread = seed_curve(progresses, x)
+            low, high = mean - spread, mean + spread
+        else:
+            p = progresses[0]
+            label = labels[i] if labels is not None else run_label(group[0])
+            grid, mean, low, high = p[x], p["reward_mean"], p["reward_min"], p["reward_max"]
+        (line,) = ax.plot(grid, mean, label=label)
+        # With a single agent (or seed) the band is empty: nothing to draw.
+        ax.fill_between(grid, low, high, color=line.get_color(), alpha=0.2, linewidth=0)
+    ax.set_xlabel(X_AXES[x])
     ax.set_ylabel("episode reward")
-    ax.set_title("mean over agents (line), min to max (band)", fontsize="medium")
+    ax.set_title("mean over seeds (line), one standard deviation (band)" if aggregate_seeds
+                 else "mean over agents (line), min to max (band)", fontsize="medium")
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.grid(alpha=0.3)
     ax.legend()

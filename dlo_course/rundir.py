@@ -93,6 +93,11 @@ VALIDATION_COLUMNS = [
 ]
 
 
+class RunFileError(ValueError):
+    """A file of a run directory or trained agent is truncated, corrupt, or does not hold
+    what it should; the message names the file."""
+
+
 # --- writing files ---
 
 
@@ -111,7 +116,21 @@ def write_json(obj: Any, path: str | Path) -> None:
 
 
 def read_json(path: str | Path) -> Any:
-    return json.loads(Path(path).read_text())
+    """A JSON file; :class:`RunFileError` if it is not JSON (a missing file stays a
+    ``FileNotFoundError``)."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise RunFileError(f"{path} is not valid JSON (truncated or corrupt?): {err}") from err
+
+
+def _config_in(saved: Any, path: Path) -> TrainConfig:
+    """The configuration of a ``config.json`` or resume state read from ``path``."""
+    try:
+        return TrainConfig.from_dict(saved["config"])
+    except (KeyError, TypeError, ValueError) as err:
+        raise RunFileError(f"{path} does not hold a valid training configuration "
+                           f"({type(err).__name__}: {err})") from err
 
 
 def _torch_save(obj: Any, path: Path) -> None:
@@ -156,7 +175,8 @@ def write_config(run_dir: Path, config: TrainConfig, n_agents: int) -> None:
 
 def load_config(run_dir: str | Path) -> TrainConfig:
     """The :class:`~dlo_course.config.TrainConfig` of a run, read from its ``config.json``."""
-    return TrainConfig.from_dict(read_json(Path(run_dir) / CONFIG_FILE)["config"])
+    path = Path(run_dir) / CONFIG_FILE
+    return _config_in(read_json(path), path)
 
 
 # --- the per-episode logs: progress.csv, validation.csv ---
@@ -170,13 +190,22 @@ def open_episode_log(path: Path, keep_episodes: int, columns: list[str] = PROGRE
     rows: list[dict[str, str]] = []
     if keep_episodes > 0 and path.exists():
         with path.open(newline="") as f:
-            rows = [r for r in csv.DictReader(f) if int(r["episode"]) <= keep_episodes]
+            rows = [r for r in csv.DictReader(f)
+                    if None not in r.values() and _episode_of(r, path) <= keep_episodes]
     f = path.open("w", newline="")
     writer = csv.DictWriter(f, fieldnames=columns)
     writer.writeheader()
     writer.writerows(rows)
     f.flush()
     return f, writer
+
+
+def _episode_of(row: dict[str, str], path: Path) -> int:
+    try:
+        return int(row["episode"])
+    except (KeyError, TypeError, ValueError) as err:
+        raise RunFileError(f"{path} is corrupt: a row without an episode number ({row})") \
+            from err
 
 
 def keep_episodes(path: Path, episodes: int) -> None:
@@ -200,12 +229,21 @@ def read_progress(run_dir: str | Path) -> dict[str, np.ndarray]:
     path = Path(run_dir) / PROGRESS_FILE
     if not path.exists():
         raise FileNotFoundError(f"{path} not found: is {run_dir} a training run directory?")
-    with path.open(newline="") as f:
-        rows = list(csv.DictReader(f))
+    try:
+        with path.open(newline="") as f:
+            rows = list(csv.DictReader(f))
+    except (UnicodeDecodeError, csv.Error) as err:
+        raise RunFileError(f"{path} is not a readable CSV file: {err}") from err
     if not rows:
         raise ValueError(f"{path} has no episode yet")
-    return {key: np.array([float(r[key]) if r[key] != "" else np.nan for r in rows])
-            for key in rows[0]}
+    missing = [c for c in ("episode", "transitions", "reward_mean") if c not in rows[0]]
+    if missing:
+        raise RunFileError(f"{path} is not a progress log: it has no {missing} column")
+    try:
+        return {key: np.array([float(r[key]) if r[key] != "" else np.nan for r in rows])
+                for key in rows[0]}
+    except (TypeError, ValueError) as err:  # a row cut short (None) or not a number
+        raise RunFileError(f"{path} is truncated or corrupt: {err}") from err
 
 
 # --- the resume state ---
@@ -264,19 +302,19 @@ def load_resume_state(run_dir: Path, agent: Any, buffer: Any, noise: Any, relabe
     pointer = run_dir / RESUME_DIR / RESUME_POINTER
     if not pointer.exists():
         return None
-    state_dir = run_dir / RESUME_DIR / read_json(pointer)["checkpoint"]
-    # Our own files, holding NumPy arrays and generator states: not weights_only.
-    shared = torch.load(state_dir / SHARED_STATE_FILE, weights_only=False)
+    state_dir = run_dir / RESUME_DIR / _pointer_field(pointer, "checkpoint")
+    shared = _load_state_file(state_dir / SHARED_STATE_FILE)
     if shared["n_agents"] != mpi.size():
         raise ValueError(f"{run_dir} was trained with {shared['n_agents']} agents; resume it "
                          f"with the same number of MPI ranks (got {mpi.size()})")
     # Through the dataclass, so that an option added since the resume state was written
     # reads as its default (off) instead of as a difference.
-    saved, now = TrainConfig.from_dict(shared["config"]).to_dict(), config.to_dict()
+    saved = _config_in(shared, state_dir / SHARED_STATE_FILE).to_dict()
+    now = config.to_dict()
     changed = sorted(k for k in now if k not in RESUMABLE_CHANGES and saved.get(k) != now[k])
     if changed:
         raise ValueError(f"cannot resume {run_dir}: the configuration differs in {changed}")
-    mine = torch.load(state_dir / _rank_state_file(mpi.rank()), weights_only=False)
+    mine = _load_state_file(state_dir / _rank_state_file(mpi.rank()))
     agent.load_state_dict(shared["agent"])
     buffer.load_state_dict(mine["buffer"])
     noise.load_state_dict(mine["noise"])
@@ -284,6 +322,32 @@ def load_resume_state(run_dir: Path, agent: Any, buffer: Any, noise: Any, relabe
         relabeller.load_state_dict(mine["her"])
     torch.set_rng_state(mine["torch_rng"])
     return dict(shared["counters"])
+
+
+def _pointer_field(pointer: Path, key: str) -> Any:
+    """A field of the resume state's pointer, ``latest.json``."""
+    try:
+        return read_json(pointer)[key]
+    except (KeyError, TypeError) as err:
+        raise RunFileError(f"{pointer} is corrupt: it has no {key!r}; start afresh with "
+                           "--overwrite") from err
+
+
+def _load_state_file(path: Path) -> dict[str, Any]:
+    """One file of the resume state, with a clear error if it is missing or unreadable."""
+    if not path.is_file():
+        raise RunFileError(f"{path} is missing: the resume state is incomplete; start afresh "
+                           "with --overwrite")
+    try:
+        # Our own files, holding NumPy arrays and generator states: not weights_only.
+        state = torch.load(path, weights_only=False)
+    except Exception as err:  # torch, zip and pickle raise many kinds
+        raise RunFileError(f"{path} is not a readable resume state (truncated or corrupt?): "
+                           f"{type(err).__name__}: {err}; start afresh with --overwrite") \
+            from err
+    if not isinstance(state, dict):
+        raise RunFileError(f"{path} does not hold a resume state")
+    return state
 
 
 def delete_resume_state(run_dir: Path) -> None:
@@ -295,7 +359,7 @@ def delete_resume_state(run_dir: Path) -> None:
 def resumable_episodes(run_dir: Path) -> int | None:
     """Episodes per agent in the run's resume state, ``None`` if it has none."""
     pointer = Path(run_dir) / RESUME_DIR / RESUME_POINTER
-    return int(read_json(pointer)["episodes_done"]) if pointer.is_file() else None
+    return int(_pointer_field(pointer, "episodes_done")) if pointer.is_file() else None
 
 
 def save_best_actor(run_dir: Path, actor: torch.nn.Module, counters: dict[str, Any]) -> None:
@@ -327,7 +391,7 @@ def run_record(folder: str | Path) -> dict:
     if config_file.is_file():
         config = read_json(config_file)
         # Through the dataclass, so that a run older than an option reads as its default.
-        cfg = TrainConfig.from_dict(config["config"])
+        cfg = _config_in(config, config_file)
         record.update(ranks=config.get("n_agents"), seed=cfg.seed, reduce=cfg.reduce,
                       commit=config.get("commit"), steps_per_episode=cfg.steps_per_episode,
                       updates_per_step=cfg.updates_per_step,

@@ -42,7 +42,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import gymnasium
 import numpy as np
@@ -250,6 +250,71 @@ def progress_row(episode: int, counters: dict[str, Any], per_agent: list[dict[st
     }
 
 
+# --- loggers: where else the per-episode scalars go ---
+
+
+class TrainingLogger:
+    """A hook that receives, on rank 0, the rows the trainer writes to ``progress.csv`` and
+    ``validation.csv``, for another destination (TensorBoard, a notebook's live plot...).
+
+    It only reads the rows: whatever it does, the training computes the same numbers."""
+
+    def open(self, run_dir: Path, episodes_done: int) -> None:
+        """The run starts in ``run_dir`` after ``episodes_done`` episodes (0 unless resumed;
+        rows of later episodes a killed run logged will be logged again)."""
+
+    def episode(self, row: dict[str, float]) -> None:
+        """One ``progress.csv`` row (:func:`progress_row`)."""
+
+    def validation(self, row: dict[str, float]) -> None:
+        """One ``validation.csv`` row."""
+
+    def close(self) -> None:
+        """The run has stopped (finished, failed or interrupted)."""
+
+
+TENSORBOARD_DIR = "tensorboard"
+"""The folder of TensorBoard's event files in a run directory."""
+
+
+class TensorBoardLogger(TrainingLogger):
+    """The per-episode scalars as ``train/COLUMN`` and the validation's as
+    ``validation/COLUMN``, with the episode as step, in ``RUN/tensorboard``
+    (``tensorboard --logdir RUN``). Needs the ``tensorboard`` package, checked at once."""
+
+    def __init__(self) -> None:
+        try:
+            from torch.utils.tensorboard import SummaryWriter
+        except ImportError as err:  # torch's message names the missing package
+            raise ImportError("TensorBoard logging needs the tensorboard package: pip install "
+                              "-e '.[tensorboard]' (or pip install tensorboard)") from err
+        self._writer_class = SummaryWriter
+        self._writer = None
+
+    def open(self, run_dir: Path, episodes_done: int) -> None:
+        # purge_step drops what a killed run wrote after its resume state, as progress.csv does
+        self._writer = self._writer_class(
+            log_dir=str(Path(run_dir) / TENSORBOARD_DIR),
+            purge_step=episodes_done + 1 if episodes_done else None)
+
+    def _scalars(self, prefix: str, row: dict[str, float]) -> None:
+        step = int(row["episode"])
+        for key, value in row.items():
+            if key != "episode" and not math.isnan(value):  # NaN: nothing to report
+                self._writer.add_scalar(f"{prefix}/{key}", value, global_step=step)
+
+    def episode(self, row: dict[str, float]) -> None:
+        self._scalars("train", row)
+
+    def validation(self, row: dict[str, float]) -> None:
+        self._scalars("validation", row)
+        self._writer.flush()  # rare and worth seeing at once
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+
+
 # --- the run ---
 
 
@@ -281,7 +346,8 @@ def observation_reference(env: gymnasium.Env) -> tuple[np.ndarray, np.ndarray]:
 
 
 def train(config: TrainConfig, resume: bool = False, progress: bool = True,
-          overwrite: bool = False, rules: UpdateRules | None = None) -> Path:
+          overwrite: bool = False, rules: UpdateRules | None = None,
+          loggers: Sequence[TrainingLogger] = ()) -> Path:
     """Train DDPG agents as configured; every MPI rank runs this function as one agent.
 
     Args:
@@ -293,6 +359,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
         rules: the DDPG update's formulas (:class:`~dlo_course.ddpg.UpdateRules`; the paper's
             by default). Not part of the configuration: functions cannot be saved in
             ``config.json``, so a run trained with other rules records only its settings.
+        loggers: hooks that also get every ``progress.csv`` and ``validation.csv`` row
+            (:class:`TrainingLogger`; e.g. :class:`TensorBoardLogger`), on rank 0.
 
     Returns:
         The run directory.
@@ -354,6 +422,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
         if checks is not None:
             validation_file, validation_writer = rundir.open_episode_log(
                 out / rundir.VALIDATION_FILE, counters["episodes_done"], VALIDATION_COLUMNS)
+        for logger in loggers:
+            logger.open(out, counters["episodes_done"])
 
     reducer = (functools.partial(mpi.allreduce_gradients, op=config.reduce)
                if n_agents > 1 else None)
@@ -373,6 +443,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
                 row = progress_row(episode + 1, counters, per_agent)
                 writer.writerow({k: format_cell(v) for k, v in row.items()})
                 progress_file.flush()
+                for logger in loggers:
+                    logger.episode(row)
                 bar.set_postfix(reward=f"{row['reward_mean']:.3g}")
                 bar.update(1)
             if checks is not None and (episode + 1) % config.validate_every == 0:
@@ -386,11 +458,13 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
                 if root:
                     if better:
                         rundir.save_best_actor(out, agent.actor, counters)
-                    validation_writer.writerow({k: format_cell(v) for k, v in {
-                        "episode": episode + 1, "transitions": counters["transitions"],
-                        "done_rate": done_rate, "distance_mean": distance,
-                        "best": int(better), "seconds": time.perf_counter() - began}.items()})
+                    checked = {"episode": episode + 1, "transitions": counters["transitions"],
+                               "done_rate": done_rate, "distance_mean": distance,
+                               "best": int(better), "seconds": time.perf_counter() - began}
+                    validation_writer.writerow({k: format_cell(v) for k, v in checked.items()})
                     validation_file.flush()
+                    for logger in loggers:
+                        logger.validation(checked)
                     bar.set_postfix(reward=f"{row['reward_mean']:.3g}",
                                     validation=f"{done_rate:.0%}")
             if (episode + 1) % config.checkpoint_every == 0 or episode + 1 == config.episodes:
@@ -404,4 +478,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
         for f in (progress_file, validation_file):
             if f is not None:
                 f.close()
+        if root:
+            for logger in loggers:
+                logger.close()
     return out
