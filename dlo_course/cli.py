@@ -432,10 +432,18 @@ def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...], x_axis:
 
 
 # --- evaluation and reproduction ---
+# dlo_course.jacobian.CONTROLLERS (restated: that module imports torch and PyBullet)
+CONTROLLER_NAMES = click.Choice(["jacobian"])
+
+
 @main.command()
 @click.option("--agent", "--checkpoint", "agent", type=click.Path(path_type=Path),
-              required=True, help="Trained agent: a run directory or agent folder holding "
-                                  "actor.pt, or the actor.pt file (--checkpoint: the old name).")
+              default=None, help="Trained agent: a run directory or agent folder holding "
+                                 "actor.pt, or the actor.pt file (--checkpoint: the old name).")
+@click.option("--controller", "controller_name", type=CONTROLLER_NAMES, default=None,
+              help="Instead of --agent, a classical controller: 'jacobian', shape servoing "
+                   "with an online deformation Jacobian (dlo_course.jacobian), for --nodes "
+                   "[4] nodes.")
 @click.option("--database", "goals", default="small", show_default=True,
               help="Goals: 'small-test' or 'large-test' (the goals of the paper's Table I), "
                    "'small' or 'large' (the whole database), a database .npz, or a .npy "
@@ -451,19 +459,28 @@ def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...], x_axis:
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed of the goal draw.")
 @click.option("--nodes", "n_nodes", type=NODE_COUNTS, default=None,
-              help="Nodes the agent must have been trained for (default: inferred).")
+              help="Nodes the agent must have been trained for (default: inferred), or the "
+                   "controller's (default 4).")
 @click.option("--time-mode", type=TIME_MODES, default="code", show_default=True)
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the summary and every episode as JSON.")
-def evaluate(agent: Path, goals: str, thresholds: tuple[float, ...], no_reinit: bool,
-             episodes: int, max_steps: int, seed: int, n_nodes: str | None, time_mode: str,
-             out: Path | None) -> None:
-    """The paper's test protocol (Table I) for one trained agent; parallel under mpiexec."""
+def evaluate(agent: Path | None, controller_name: str | None, goals: str,
+             thresholds: tuple[float, ...], no_reinit: bool, episodes: int, max_steps: int,
+             seed: int, n_nodes: str | None, time_mode: str, out: Path | None) -> None:
+    """The paper's test protocol (Table I) for one trained agent or a classical controller;
+    parallel under mpiexec."""
     import json
     from dataclasses import asdict
 
     from dlo_course.evaluation import TrainedAgentError, evaluate_thresholds
 
+    if (agent is None) == (controller_name is None):
+        raise click.UsageError("give --agent or --controller (not both)")
+    if controller_name is not None:
+        from dlo_course.jacobian import CONTROLLERS
+
+        n_nodes = n_nodes or "4"
+        agent = CONTROLLERS[controller_name](int(n_nodes))
     thresholds = thresholds or (0.05,)
     try:
         results = evaluate_thresholds(agent, goals, thresholds,

@@ -162,6 +162,38 @@ def load_actor(agent: str | Path, n_nodes: int | None = None):
     return actor, trained_nodes
 
 
+# ------------------------------------------------------------------------------ controllers
+class Controller:
+    """A hand-made policy with a memory, evaluated like a trained agent.
+
+    A trained actor is a pure function of the observation; a classical controller (e.g.
+    :class:`dlo_course.jacobian.JacobianController`) also remembers what it saw earlier in the
+    episode. Wherever the protocol takes an actor (:func:`play_episode`, :func:`run_traces`,
+    :func:`evaluate_thresholds`), it takes a ``Controller`` too, and then:
+
+    * calls :meth:`bind` once with each environment it will act in (robot constants only);
+    * calls :meth:`reset` with the first observation of every episode;
+    * asks :meth:`act` for each action, one observation at a time.
+
+    A controller must be deterministic given its episode, like an actor without noise: with
+    reinitialisation, episodes with the same goal are simulated once (:func:`run_traces`).
+    """
+
+    n_nodes: int
+    """Selected nodes of the observations it expects."""
+
+    def bind(self, env) -> None:
+        """Read what it needs of the robot from the environment (nothing by default)."""
+
+    def reset(self, obs: np.ndarray) -> None:
+        """Start an episode whose first observation is ``obs`` (6 + 6m,)."""
+        raise NotImplementedError
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """The action (3,) in [-1, 1] for the observation ``obs`` (6 + 6m,)."""
+        raise NotImplementedError
+
+
 # ------------------------------------------------------------------------------ goals
 def goal_schedule(n_goals: int, episodes: int, seed: int) -> np.ndarray:
     """(episodes,) goal index of every test episode, drawn uniformly from the seed."""
@@ -204,7 +236,8 @@ def play_episode(actor, env, obs: np.ndarray, max_steps: int) -> tuple[bool, int
     """Run the deterministic policy from the environment's current state, just after a reset.
 
     Args:
-        actor: a module mapping (1, obs_dim) observation tensors to (1, 3) actions.
+        actor: a module mapping (1, obs_dim) observation tensors to (1, 3) actions, or a
+            :class:`Controller` (reset with ``obs``, then asked for each action).
         env: the environment, reset; ``obs`` is the observation that reset returned.
         max_steps: at most this many actions.
 
@@ -220,8 +253,14 @@ def _play(actor, env, obs: np.ndarray, max_steps: int) -> tuple[bool, list[float
     """:func:`play_episode`, also returning the mean node distance after every action."""
     distances: list[float] = []
     info: dict = {}
+    controller = isinstance(actor, Controller)
+    if controller:
+        actor.reset(obs)  # a controller's memory lasts one episode
     for _ in range(max_steps):
-        action = policy_action(actor, obs[None])[0]  # a batch of one, as it always was
+        if controller:
+            action = actor.act(obs)
+        else:
+            action = policy_action(actor, obs[None])[0]  # a batch of one, as it always was
         obs, _, terminated, truncated, info = env.step(action)
         distances.append(float(info["distance"]))
         if terminated or truncated:
@@ -264,7 +303,8 @@ def run_traces(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
     same episode: it is simulated once (the paper's test files repeat their goals).
 
     Args:
-        actor: deterministic policy, a module mapping (1, obs_dim) tensors to (1, 3) actions.
+        actor: deterministic policy, a module mapping (1, obs_dim) tensors to (1, 3) actions,
+            or a :class:`Controller` (bound to ``env`` by the caller).
         env: a :class:`~dlo_course.env.DLOShapeEnv` built with the test goals; it stops each
             episode at its own ``threshold``.
         episode_ids: global indices of the episodes this process runs.
@@ -317,12 +357,14 @@ def evaluate(agent: str | Path, goals: str | Path | np.ndarray = "small",
                                max_steps, seed, n_nodes, time_mode, show_progress)[threshold]
 
 
-def evaluate_thresholds(agent: str | Path, goals: str | Path | np.ndarray,
+def evaluate_thresholds(agent: str | Path | Controller, goals: str | Path | np.ndarray,
                         thresholds: Sequence[float], reinitialize: bool = True,
                         episodes: int = 1000, max_steps: int = 30, seed: int = 0,
                         n_nodes: int | None = None, time_mode: str = "code",
                         show_progress: bool = True) -> dict[float, tuple[Summary | None, list]]:
     """:func:`evaluate` at several thresholds, with the same goals.
+
+    ``agent`` may also be a :class:`Controller` (a hand-made policy), evaluated the same way.
 
     With reinitialisation the episodes are run once, at the smallest threshold, and scored at
     every threshold (:class:`EpisodeTrace`); without, each threshold has its own chain of
@@ -339,7 +381,12 @@ def evaluate_thresholds(agent: str | Path, goals: str | Path | np.ndarray,
         raise ValueError(f"max_steps must be at least 1, got {max_steps}")
     if not thresholds:
         raise ValueError("give at least one threshold")
-    actor, n_nodes = load_actor(agent, n_nodes)
+    if isinstance(agent, Controller):
+        if n_nodes is not None and n_nodes != agent.n_nodes:
+            raise ValueError(f"the controller is for {agent.n_nodes} nodes, not {n_nodes}")
+        actor, n_nodes = agent, agent.n_nodes
+    else:
+        actor, n_nodes = load_actor(agent, n_nodes)
     goal_set = resolve_goals(goals, n_nodes)
     schedule = goal_schedule(len(goal_set), episodes, seed)
     rank, size = mpi.rank(), mpi.size()
@@ -354,6 +401,8 @@ def evaluate_thresholds(agent: str | Path, goals: str | Path | np.ndarray,
             # No TimeLimit: run_traces stops every episode after max_steps itself.
             env = make_env(max_episode_steps=None, n_nodes=n_nodes, goals=goal_set,
                            threshold=run_threshold, time_mode=time_mode)
+            if isinstance(actor, Controller):
+                actor.bind(env)
             try:
                 traces = run_traces(actor, env, mine, schedule, reinitialize, max_steps,
                                     progress=lambda: bar.update(1))

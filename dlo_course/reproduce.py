@@ -101,29 +101,37 @@ def goal_source(database: str, protocol: str) -> str:
     return f"{database}-test" if protocol == "test" else database
 
 
-def _run_key(agent: Path, group: list[Cell], protocol: str, episodes: int, max_steps: int,
-             seed: int, time_mode: str) -> str:
-    """A file name for one evaluation run: its setting and a digest of the actor's weights,
-    so that a result is reused only for the same agent, goals and protocol."""
-    first = group[0]
-    digest = hashlib.sha256((agent / "actor.pt").read_bytes()).hexdigest()[:12]
-    thresholds = "-".join(f"{c.threshold:g}" for c in group)
-    return (f"{protocol}_{first.reinit}_n{first.nodes}_{first.database}_t{thresholds}_"
-            f"e{episodes}_s{max_steps}_seed{seed}_{time_mode}_{digest}.json")
+def _policy(agents: Path | None, controller: str | None, n_nodes: int) -> tuple[object, str]:
+    """What plays a cell's episodes, and a digest that names it for the cache: the trained
+    agent of ``agents`` (its actor's weights) or the named classical controller (its
+    settings)."""
+    if controller is None:
+        agent = agent_dir(agents, n_nodes)
+        return agent, hashlib.sha256((agent / "actor.pt").read_bytes()).hexdigest()[:12]
+    from dlo_course.jacobian import CONTROLLERS  # only when a controller is asked for
+
+    policy = CONTROLLERS[controller](n_nodes)
+    settings = json.dumps({k: v for k, v in sorted(vars(policy).items())
+                           if isinstance(v, (int, float, str))})
+    return policy, hashlib.sha256(settings.encode()).hexdigest()[:12]
 
 
-def evaluate_cells(agents: Path, episodes: int, max_steps: int, seed: int,
+def evaluate_cells(agents: Path | None, episodes: int, max_steps: int, seed: int,
                    time_mode: str = "code", cells: list[Cell] | None = None,
-                   protocol: str = "test", cache: Path | None = None) -> list[dict]:
+                   protocol: str = "test", cache: Path | None = None,
+                   controller: str | None = None) -> list[dict]:
     """Evaluate every cell; on rank 0 returns one dict per cell, elsewhere an empty list.
 
     Cells that differ only by threshold share their episodes when the world is reinitialised
     (:func:`dlo_course.evaluation.evaluate_thresholds`): 12 runs make the 24 cells.
 
     Args:
+        agents: the folder of trained agents (``nodes{2,4,6}``); ignored with ``controller``.
         cache: a folder where each finished run leaves its results (with the minutes it
             took), reused when the same agent is evaluated the same way again: a stopped
             reproduction resumes at the run it was in instead of starting over.
+        controller: evaluate this classical controller (a name of
+            :data:`dlo_course.jacobian.CONTROLLERS`, default settings) instead of the agents.
     """
     cells = cells or table1_cells()
     groups: dict[tuple, list[Cell]] = {}
@@ -131,21 +139,22 @@ def evaluate_cells(agents: Path, episodes: int, max_steps: int, seed: int,
         key = (cell.reinit, cell.nodes, cell.database) + (
             () if cell.reinit == "with" else (cell.threshold,))
         groups.setdefault(key, []).append(cell)
+    prefix = protocol if controller is None else f"{controller}_{protocol}"
     results: dict[Cell, dict] = {}
-    for group in tqdm(groups.values(), desc=f"Table I ({protocol} goals)", unit="run",
+    for group in tqdm(groups.values(), desc=f"Table I ({prefix} goals)", unit="run",
                       disable=not mpi.is_root()):
         first = group[0]
-        agent = agent_dir(agents, first.nodes)
-        saved = None
-        if cache is not None:
-            saved = cache / _run_key(agent, group, protocol, episodes, max_steps, seed,
-                                     time_mode)
+        policy, identity = _policy(agents, controller, first.nodes)
+        thresholds = "-".join(f"{c.threshold:g}" for c in group)
+        saved = None if cache is None else cache / (
+            f"{prefix}_{first.reinit}_n{first.nodes}_{first.database}_t{thresholds}_"
+            f"e{episodes}_s{max_steps}_seed{seed}_{time_mode}_{identity}.json")
         if saved is not None and saved.is_file():  # every rank sees the same files
             done = json.loads(saved.read_text())
         else:
             began = time.perf_counter()
             by_threshold = evaluate_thresholds(
-                agent, goal_source(first.database, protocol),
+                policy, goal_source(first.database, protocol),
                 [cell.threshold for cell in group], reinitialize=first.reinit == "with",
                 episodes=episodes, max_steps=max_steps, seed=seed, n_nodes=first.nodes,
                 time_mode=time_mode, show_progress=False)
@@ -162,6 +171,21 @@ def evaluate_cells(agents: Path, episodes: int, max_steps: int, seed: int,
                 results[cell] = {"cell": cell, **summary, "minutes": done["minutes"],
                                  "run_cells": len(group)}
     return [results[cell] for cell in cells if cell in results]
+
+
+def evaluate_controller_cells(controller: str, episodes: int, max_steps: int, seed: int,
+                              time_mode: str = "code", cells: list[Cell] | None = None,
+                              protocol: str = "test", cache: Path | None = None
+                              ) -> list[dict]:
+    """:func:`evaluate_cells` for a classical controller instead of the trained agents: the
+    same cells, goals, episodes and protocol, rows in the same format; a run is cached under
+    the controller's name and settings instead of an actor's digest."""
+    from dlo_course.jacobian import CONTROLLERS
+
+    if controller not in CONTROLLERS:
+        raise ValueError(f"controller must be one of {sorted(CONTROLLERS)}, got {controller!r}")
+    return evaluate_cells(None, episodes, max_steps, seed, time_mode, cells, protocol, cache,
+                          controller=controller)
 
 
 def evaluation_minutes(rows: list[dict], reinit: str | None = None) -> float:
@@ -282,7 +306,8 @@ PAPER_TRANSITIONS = 32 * 63 * 300
 
 def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
               max_steps: int = 30, seed: int = 0, train_preset: str | None = None,
-              time_mode: str = "code", whole_database: str = "with") -> Path | None:
+              time_mode: str = "code", whole_database: str = "with",
+              controller: str | None = None) -> Path | None:
     """Regenerate Table I and Figs. 4-5 (see the module docstring); returns the report path
     on rank 0.
 
@@ -291,6 +316,10 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
             default the shipped ones.
         whole_database: which cells also get the harder protocol, goals drawn from the whole
             database: "with" (the 12 cells with reinitialisation), "all" or "none".
+        controller: also evaluate this classical controller ("jacobian",
+            :func:`evaluate_controller_cells`) on the paper's test goals, every cell, and
+            write its table beside the agents' (``table1_<controller>.csv``, ``.md``) and in
+            the report. None (default): the agents only.
 
     Every finished evaluation run leaves its results in ``out/runs/``; running the same
     command again reuses them (for the same agents, episodes and seed), so a reproduction
@@ -298,6 +327,12 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
     """
     if whole_database not in WHOLE_DATABASE_CELLS:
         raise ValueError(f"whole_database must be one of {sorted(WHOLE_DATABASE_CELLS)}")
+    if controller is not None:  # a wrong name fails now, not after the agents' hour
+        from dlo_course.jacobian import CONTROLLERS
+
+        if controller not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {sorted(CONTROLLERS)}, "
+                             f"got {controller!r}")
     out = Path(out)
     paper = read_paper_table()
     if train_preset is not None:
@@ -313,6 +348,9 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
     whole_rows = (evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode,
                                  cells=whole_cells, protocol="whole", cache=cache)
                   if whole_cells else [])
+    controller_rows = (evaluate_controller_cells(controller, episodes, max_steps, seed,
+                                                 time_mode, protocol="test", cache=cache)
+                       if controller is not None else [])
     if not mpi.is_root():
         return None
     csv_path, md_path = write_table(rows, paper, out)
@@ -323,6 +361,13 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
         tables.append(("## The harder protocol: goals from the whole database", whole_md,
                        f"Goals: {GOAL_PROTOCOLS['whole']}; the paper's numbers are those of "
                        f"its test goals, for comparison. {_time_note(whole_rows)}."))
+    if controller_rows:
+        _, controller_md = write_table(controller_rows, paper, out, name=f"table1_{controller}")
+        tables.append((f"## A classical baseline: the `{controller}` controller, not learned",
+                       controller_md,
+                       f"Goals: {GOAL_PROTOCOLS['test']}; the same episodes as the agents'. "
+                       f"A hand-made controller (`dlo_course/jacobian.py`), default "
+                       f"settings. {_time_note(controller_rows)}."))
     plot_learning_curves([agent_dir(checkpoints, n) for n in NODES],
                          out=out / "fig4_learning_curves.png",
                          labels=[f"{n} nodes" for n in NODES])
@@ -367,6 +412,8 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
         lines += ["", title, "", note, "", path.read_text()]
     lines += [f"Files: `{csv_path.name}`, `{md_path.name}`"
               + (", `table1_whole_database.csv`, `table1_whole_database.md`" if whole_rows
+                 else "")
+              + (f", `table1_{controller}.csv`, `table1_{controller}.md`" if controller_rows
                  else "") + f", `fig4_learning_curves.png`, `{fig5.name}`."]
     report = out / "report.md"
     report.write_text("\n".join(lines) + "\n")
