@@ -11,6 +11,14 @@ Conventions (nbgrader's, kept deliberately small):
 * The answer sits between ``### BEGIN SOLUTION`` and ``### END SOLUTION``. Releasing replaces
   each such block, markers included, by ``raise NotImplementedError()`` at the same
   indentation, so the signature and the docstring stay.
+* A **written answer** is a Markdown cell in which the student writes prose (an analysis, a
+  prediction made before running a cell). It carries ``cell.metadata["dlo_course"] =
+  {"answer": NAME, "points": N, "min_words": W}`` and starts with the comment
+  ``<!-- answer: NAME (N points, at least W words) -->`` (the fallback, as for exercises).
+  The solution's cell holds notes for the instructor; releasing keeps only the comment and
+  :data:`ANSWER_PLACEHOLDER`. It is scored for presence and length only
+  (:func:`written_answer_problem`) and recorded verbatim in the class CSV, for the
+  instructor to read.
 * **Setup** cells (tag ``setup`` in ``cell.metadata["tags"]``) hold what the exercises need
   (imports, constants). The grader runs only the setup cells and the exercise cells, in a fresh
   namespace, so it never waits for a simulation or a training run of the notebook.
@@ -57,6 +65,9 @@ GRADING_TESTS_DIR = REPO_ROOT / "tests" / "grading"
 
 _EXERCISE_COMMENT = re.compile(r"^\s*#\s*exercise:\s*([A-Za-z_]\w*)\s*\((\d+)\s*points?\)",
                                re.IGNORECASE)
+ANSWER_PLACEHOLDER = "YOUR ANSWER HERE"
+_ANSWER_COMMENT = re.compile(r"^\s*<!--\s*answer:\s*([A-Za-z_]\w*)\s*\((\d+)\s*points?"
+                             r"(?:\s*,\s*at least\s*(\d+)\s*words?)?\s*\)\s*-->", re.IGNORECASE)
 
 
 # The notebooks' helpers live in dlo_course.notebook; re-exported here for notebooks written
@@ -112,6 +123,69 @@ def exercise_info(cell: dict[str, Any]) -> dict[str, Any] | None:
     match = _EXERCISE_COMMENT.match(first)
     if match:
         return {"exercise": match.group(1), "points": int(match.group(2))}
+    return None
+
+
+def answer_info(cell: dict[str, Any]) -> dict[str, Any] | None:
+    """``{"exercise": name, "points": n, "min_words": w, "kind": "text"}`` if ``cell`` is a
+    written-answer cell (Markdown), else None. The metadata wins; the first-line comment
+    ``<!-- answer: NAME (N points, at least W words) -->`` is the fallback."""
+    if cell.get("cell_type") != "markdown":
+        return None
+    meta = cell.get("metadata", {}).get(METADATA_KEY) or {}
+    if "answer" in meta:
+        return {"exercise": str(meta["answer"]), "points": int(meta.get("points", 1)),
+                "min_words": int(meta.get("min_words", 1)), "kind": "text"}
+    first = cell_source(cell).lstrip("\n").split("\n", 1)[0]
+    match = _ANSWER_COMMENT.match(first)
+    if match:
+        return {"exercise": match.group(1), "points": int(match.group(2)),
+                "min_words": int(match.group(3) or 1), "kind": "text"}
+    return None
+
+
+def graded_info(cell: dict[str, Any]) -> dict[str, Any] | None:
+    """What a graded cell is worth: :func:`exercise_info` (with ``"kind": "code"``) or
+    :func:`answer_info`; None for any other cell."""
+    info = exercise_info(cell)
+    if info is not None:
+        return {**info, "kind": "code"}
+    return answer_info(cell)
+
+
+def answer_text(cell: dict[str, Any]) -> str:
+    """What the student wrote in a written-answer cell: the cell without its first-line
+    comment and without the placeholder, stripped."""
+    lines = cell_source(cell).strip("\n").split("\n")
+    if lines and _ANSWER_COMMENT.match(lines[0]):
+        lines = lines[1:]
+    return "\n".join(lines).replace(ANSWER_PLACEHOLDER, "").strip()
+
+
+def written_answers(path: str | Path) -> dict[str, dict[str, Any]]:
+    """The written answers of a notebook: name -> :func:`answer_info` plus ``"text"``
+    (:func:`answer_text`). The last cell of a name wins, as for exercises."""
+    found: dict[str, dict[str, Any]] = {}
+    for cell in read_notebook(path)["cells"]:
+        info = answer_info(cell)
+        if info is not None:
+            found[info["exercise"]] = {**info, "text": answer_text(cell)}
+    return found
+
+
+def count_words(text: str) -> int:
+    return len(re.findall(r"[^\W_]+(?:['’.-][^\W_]+)*", text))
+
+
+def written_answer_problem(text: str, min_words: int) -> str | None:
+    """Why a written answer gets no points (None: full points). Only its presence and length
+    count here; what it says is for the instructor, who reads it in the class CSV."""
+    words = count_words(text)
+    if words == 0:
+        return f"no answer written: replace {ANSWER_PLACEHOLDER!r} with your own words"
+    if words < min_words:
+        return (f"{words} word{'s' if words != 1 else ''}: this answer needs at least "
+                f"{min_words} words")
     return None
 
 
@@ -182,6 +256,12 @@ def release_notebook(nb: dict[str, Any], name: str = "notebook") -> dict[str, An
     """The student version of a solution notebook (outputs cleared, solutions removed)."""
     nb = clear_outputs(nb)
     for index, cell in enumerate(nb["cells"]):
+        written = answer_info(cell)
+        if written is not None:  # the instructor's notes give way to the placeholder
+            _set_source(cell, f"<!-- answer: {written['exercise']} ({written['points']} "
+                              f"point{'s' if written['points'] != 1 else ''}, at least "
+                              f"{written['min_words']} words) -->\n{ANSWER_PLACEHOLDER}")
+            continue
         if cell.get("cell_type") != "code":
             continue
         source = cell_source(cell)
@@ -203,11 +283,13 @@ def release_notebook(nb: dict[str, Any], name: str = "notebook") -> dict[str, An
 
 
 def exercises(folder: str | Path) -> list[dict[str, Any]]:
-    """Every exercise of the notebooks in ``folder``: notebook stem, name, points, in order."""
+    """Every graded cell of the notebooks in ``folder``, in order: notebook stem, name,
+    points and kind ("code": an exercise; "text": a written answer, with its
+    ``min_words``)."""
     found = []
     for path in notebooks_in(folder):
         for cell in read_notebook(path)["cells"]:
-            info = exercise_info(cell)
+            info = graded_info(cell)
             if info is not None:
                 found.append({"notebook": path.stem, **info})
     return found
@@ -596,10 +678,15 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     """Grade every student folder in ``submissions`` and write one CSV row per student.
 
     Each sub-folder of ``submissions`` is one student (its name is the student's id) and holds
-    that student's notebooks. Columns: ``student``, one column of points per exercise (in the
-    order of the course), ``total``, ``max_total`` and ``error`` (empty when grading ran).
-    The grader's full output for each student (what failed, and why) is written beside the
-    CSV, in ``<out stem>_logs/<student>.txt``, for feedback.
+    that student's notebooks. Columns: ``student``, one column of points per exercise and
+    written answer (in the order of the course), ``total``, ``max_total``, ``error`` (empty
+    when grading ran), then one column ``<answer>_text`` per written answer holding what the
+    student wrote, verbatim (its points only say that it is there and long enough).
+
+    Beside the CSV: ``<out stem>_logs/<student>.txt``, the grader's full output, and
+    ``<out stem>_feedback/<student>.md``, a feedback sheet for the student: the points of
+    every exercise and, for each one that lost points, the failing check's message
+    (:func:`feedback_markdown`).
 
     Args:
         catalog: folder whose notebooks list the exercises (the solutions), so every student
@@ -612,8 +699,11 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
         raise FileNotFoundError(f"no student folders in {submissions}")
     known = exercises(catalog) if Path(catalog).is_dir() else []
     columns = [e["exercise"] for e in known]
+    texts = [e["exercise"] for e in known if e.get("kind") == "text"]
     logs = out.parent / f"{out.stem}_logs"
+    feedback = out.parent / f"{out.stem}_feedback"
     logs.mkdir(parents=True, exist_ok=True)
+    feedback.mkdir(parents=True, exist_ok=True)
     from concurrent.futures import ThreadPoolExecutor
 
     def grade_one(k: int, student: Path) -> dict[str, Any]:
@@ -628,17 +718,100 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
         (logs / f"{student.name}.txt").write_text(report["output"], encoding="utf-8")
         earned = {e["exercise"]: e["earned"] for e in report["exercises"]}
         columns += [name for name in earned if name not in columns]
+        texts += [e["exercise"] for e in report["exercises"]
+                  if "text" in e and e["exercise"] not in texts]
         max_total = sum(e["points"] for e in known) if known else report["max_total"]
-        rows.append({"student": student.name, **earned, "total": report["total"],
-                     "max_total": max_total, "error": report["error"] or ""})
+        row = {"student": student.name, **earned, "total": report["total"],
+               "max_total": max_total, "error": report["error"] or ""}
+        row.update({f"{e['exercise']}_text": e["text"] for e in report["exercises"]
+                    if "text" in e})
+        rows.append(row)
+        (feedback / f"{student.name}.md").write_text(
+            feedback_markdown(student.name, report, known, max_total), encoding="utf-8")
     out.parent.mkdir(parents=True, exist_ok=True)
-    with out.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=["student", *columns, "total", "max_total", "error"])
+    text_columns = [f"{name}_text" for name in texts]
+    with out.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=["student", *columns, "total", "max_total",
+                                               "error", *text_columns])
         writer.writeheader()
         for row in rows:
-            writer.writerow({c: row.get(c, 0) for c in columns} | {
-                k: row[k] for k in ("student", "total", "max_total", "error")})
+            writer.writerow({c: row.get(c, 0) for c in columns}
+                            | {c: row.get(c, "") for c in text_columns}
+                            | {k: row[k] for k in ("student", "total", "max_total", "error")})
     return rows
+
+
+FEEDBACK_MESSAGE_LIMIT = 1500  # characters of one failing check's message in a feedback sheet
+
+
+_FRAME = re.compile(r'^\s*File "([^"]*)", line \d+')
+
+
+def feedback_message(message: str) -> str:
+    """A failing check's message as a student should read it: without pytest's "Failed: "
+    prefix, without the traceback frames of the grader's files (a frame of the student's own
+    cells, ``<... exercise NAME>``, stays: it points at their line), and cut to
+    :data:`FEEDBACK_MESSAGE_LIMIT` characters."""
+    text = str(message or "").strip()
+    if text.startswith("Failed: "):
+        text = text[len("Failed: "):]
+    kept, skipping = [], False
+    for line in text.split("\n"):
+        frame = _FRAME.match(line)
+        if frame:
+            skipping = not frame.group(1).startswith("<")
+        elif skipping and not line.startswith(" "):
+            skipping = False  # the frame's indented source lines are over
+        if not skipping:
+            kept.append(line)
+    text = "\n".join(kept).strip()
+    if len(text) > FEEDBACK_MESSAGE_LIMIT:
+        text = text[:FEEDBACK_MESSAGE_LIMIT].rstrip() + "\n[...]"
+    return text
+
+
+def feedback_markdown(student: str, report: dict[str, Any],
+                      known: list[dict[str, Any]] | None = None,
+                      max_total: float | None = None) -> str:
+    """One student's feedback sheet (Markdown): the total, a table of the points of every
+    exercise and, for each one that lost points, why: the failing check's message, without
+    the grader's traceback. ``report`` is :func:`grade_folder`'s; ``known`` the course's
+    exercises (:func:`exercises`), so that a notebook not handed in still shows its
+    exercises."""
+    graded = {e["exercise"]: e for e in report.get("exercises", [])}
+    known = list(known or [])
+    entries = [graded.get(e["exercise"], {**e, "earned": 0, "outcome": "not graded",
+                                          "message": f"{e['notebook']}.ipynb was not found "
+                                                     "or could not be graded"})
+               for e in known]
+    listed = {e["exercise"] for e in known}
+    entries += [e for name, e in graded.items() if name not in listed]
+    if max_total is None:
+        max_total = sum(e["points"] for e in entries)
+    total = sum(e.get("earned", 0) for e in entries)
+    lines = [f"# Feedback: {student}", "", f"**Total: {total:g} / {max_total:g} points.**", ""]
+    if report.get("error"):
+        lines += [f"The grader could not grade this folder: {feedback_message(report['error'])}",
+                  ""]
+    lines += ["| notebook | exercise | points | result |", "|---|---|---|---|"]
+    for e in entries:
+        result = "passed" if e.get("earned", 0) == e["points"] else e.get("outcome", "failed")
+        if "text" in e:
+            words = count_words(e["text"])
+            result += f" (written answer, {words} word{'s' if words != 1 else ''})"
+        lines.append(f"| {e['notebook']} | `{e['exercise']}` | {e.get('earned', 0):g} / "
+                     f"{e['points']:g} | {result} |")
+    lost = [e for e in entries if e.get("earned", 0) < e["points"]]
+    if lost:
+        lines += ["", "## What to look at", ""]
+        for e in lost:
+            message = feedback_message(e.get("message", "")) or e.get("outcome", "failed")
+            fence = "````" if "```" in message else "```"
+            lines += [f"### `{e['exercise']}` ({e['notebook']}): {e.get('earned', 0):g} / "
+                      f"{e['points']:g}", "", fence + "text", message, fence, ""]
+    else:
+        lines += ["", "Every check passed."]
+    return "\n".join(lines).rstrip() + "\n"
 
 
 def summary_lines(items: Iterable[dict[str, Any]]) -> list[str]:

@@ -68,6 +68,11 @@ def test_each_lesson_has_goals_exercises_summary_and_reading(path):
         info = course.exercise_info(cell)
         first = course.cell_source(cell).split("\n", 1)[0]
         assert first.startswith(f"# exercise: {info['exercise']} ({info['points']} point")
+    for cell in nb["cells"]:  # a written answer's metadata and its first-line comment agree
+        info = course.answer_info(cell)
+        if info is not None:
+            without_metadata = {**cell, "metadata": {}}
+            assert course.answer_info(without_metadata) == info, course.cell_source(cell)
 
 
 # ------------------------------------------------------------------------ release
@@ -226,6 +231,144 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
     assert float(bob["total"]) == sum(points.values()) - sum(points[n] for n in lost)
 
 
+def test_written_answers_are_released_as_placeholders():
+    """A written answer's cell keeps its first-line comment; the instructor's notes go."""
+    found = 0
+    for path in NOTEBOOKS:
+        solution = course.read_notebook(path)
+        lesson = course.read_notebook(LESSONS / path.name)
+        for mine, theirs in zip(solution["cells"], lesson["cells"], strict=True):
+            info = course.answer_info(mine)
+            if info is None:
+                continue
+            found += 1
+            assert course.answer_info(theirs) == info
+            assert course.answer_text(theirs) == ""
+            assert course.ANSWER_PLACEHOLDER in course.cell_source(theirs)
+            assert course.written_answer_problem(course.answer_text(mine),
+                                                 info["min_words"]) is None, \
+                f"{path.name}: the solution's {info['exercise']} is too short for its own grader"
+    assert found >= 2
+
+
+def test_written_answer_problem_counts_words():
+    assert course.written_answer_problem("", 3).startswith("no answer written")
+    assert course.written_answer_problem("  \n ", 1).startswith("no answer written")
+    assert "2 words" in course.written_answer_problem("Two words.", 3)
+    assert course.written_answer_problem("The paper's 4-node agent wins.", 5) is None
+    cell = {"cell_type": "markdown", "metadata": {},
+            "source": "<!-- answer: guess (1 point, at least 4 words) -->\nYOUR ANSWER HERE"}
+    assert course.answer_info(cell) == {"exercise": "guess", "points": 1, "min_words": 4,
+                                        "kind": "text"}
+    assert course.answer_text(cell) == ""
+    cell["source"] += "\nA few of my own words."
+    assert course.answer_text(cell) == "A few of my own words."
+
+
+CAPSTONE = "13_capstone_table_one"
+
+
+def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path):
+    """Grading a class records each written answer verbatim in the CSV (points for presence
+    and length only) and writes one Markdown feedback sheet per student: points per
+    exercise and the failing check's message, without tracebacks."""
+    catalog_dir = tmp_path / "catalog"
+    catalog_dir.mkdir()
+    (catalog_dir / f"{CAPSTONE}.ipynb").write_bytes((SOLUTIONS / f"{CAPSTONE}.ipynb").read_bytes())
+    submissions = tmp_path / "submissions"
+    (submissions / "alice").mkdir(parents=True)
+    (submissions / "bob").mkdir(parents=True)
+    (submissions / "carol").mkdir(parents=True)  # hands in nothing
+    (submissions / "alice" / f"{CAPSTONE}.ipynb").write_bytes(
+        (SOLUTIONS / f"{CAPSTONE}.ipynb").read_bytes())
+    essay = ('Our agents trail the paper in most cells, "clearly"; yet, with 20 episodes,\n'
+             "the intervals are wide — so: more episodes first, then longer training, on more "
+             "ranks, before any claim of a reproduction can be made by anyone.")
+    nb = course.read_notebook(LESSONS / f"{CAPSTONE}.ipynb")
+    solved = {course.exercise_info(c)["exercise"]: course.cell_source(c)
+              for c in course.read_notebook(SOLUTIONS / f"{CAPSTONE}.ipynb")["cells"]
+              if course.exercise_info(c)}
+    for cell in nb["cells"]:
+        info = course.graded_info(cell)
+        if info is None:
+            continue
+        source = course.cell_source(cell)
+        if info["exercise"] == "done_interval":
+            source = solved["done_interval"]
+        elif info["exercise"] == "paper_verdict":  # a wrong answer: the labels swapped
+            source = solved["paper_verdict"].replace('return "above"', 'return "x"').replace(
+                'return "below"', 'return "above"').replace('return "x"', 'return "below"')
+        elif info["exercise"] == "analysis_next_step":
+            source = source.replace(course.ANSWER_PLACEHOLDER, essay)
+        elif info["exercise"] == "prediction_cells":
+            source = source.replace(course.ANSWER_PLACEHOLDER, "Six.")
+        cell["source"] = source.splitlines(keepends=True)
+    course.write_notebook(nb, submissions / "bob" / f"{CAPSTONE}.ipynb")
+
+    out = tmp_path / "grades.csv"
+    rows = course.grade(submissions, out, course.GRADING_TESTS_DIR / f"test_{CAPSTONE}.py",
+                        catalog=catalog_dir, progress=False)
+    assert [r["student"] for r in rows] == ["alice", "bob", "carol"]
+    with out.open(newline="", encoding="utf-8") as f:
+        reader = csv.DictReader(f)
+        graded = [e for e in course.exercises(catalog_dir)]
+        texts = [e["exercise"] for e in graded if e["kind"] == "text"]
+        assert reader.fieldnames == ["student", *[e["exercise"] for e in graded], "total",
+                                     "max_total", "error", *[f"{t}_text" for t in texts]]
+        csv_rows = {row["student"]: row for row in reader}
+    alice, bob, carol = csv_rows["alice"], csv_rows["bob"], csv_rows["carol"]
+    points = {e["exercise"]: e["points"] for e in graded}
+    assert float(alice["total"]) == float(alice["max_total"]) == sum(points.values())
+    for name in texts:  # the instructor's notes, as the student's notebook holds them
+        assert alice[f"{name}_text"] == course.written_answers(
+            SOLUTIONS / f"{CAPSTONE}.ipynb")[name]["text"]
+    assert bob["analysis_next_step_text"] == essay  # verbatim: newline, quotes, commas
+    assert float(bob["analysis_next_step"]) == points["analysis_next_step"]
+    assert bob["prediction_cells_text"] == "Six." and float(bob["prediction_cells"]) == 0
+    assert bob["analysis_comparison_text"] == "" and float(bob["analysis_comparison"]) == 0
+    assert float(bob["done_interval"]) == points["done_interval"]
+    assert float(bob["paper_verdict"]) == 0
+    assert float(carol["total"]) == 0 and all(carol[f"{t}_text"] == "" for t in texts)
+
+    feedback = tmp_path / "grades_feedback"
+    assert sorted(p.name for p in feedback.iterdir()) == ["alice.md", "bob.md", "carol.md"]
+    assert "Every check passed." in (feedback / "alice.md").read_text()
+    sheet = (feedback / "bob.md").read_text()
+    assert f"**Total: {float(bob['total']):g} / {sum(points.values()):g} points.**" in sheet
+    assert f"| {CAPSTONE} | `done_interval` | 2 / 2 | passed |" in sheet
+    assert "| `paper_verdict` | 0 / 1 | failed |" in sheet
+    assert "### `paper_verdict`" in sheet and "expected 'below'" in sheet
+    assert "1 word: this answer needs at least 10 words" in sheet
+    assert "no answer written" in sheet  # analysis_comparison
+    for noise in ("Traceback", "tests/grading/", "conftest.py", "Failed: "):
+        assert noise not in sheet, noise
+    assert f"no notebook {CAPSTONE}.ipynb" in (feedback / "carol.md").read_text()
+
+
+def test_release_cli_passes_the_grading_tests_folder(tmp_path, monkeypatch):
+    """`dlo-course course release --student DIR --tests T` hands T to release_student;
+    --tests without --student is refused."""
+    seen = {}
+
+    def fake_release_student(dest, **kwargs):
+        seen.update(kwargs, dest=dest)
+        return ["README.md"]
+
+    monkeypatch.setattr(course, "release_student", fake_release_student)
+    tests = tmp_path / "my_grading"
+    tests.mkdir()
+    result = CliRunner().invoke(main, ["course", "release", "--student",
+                                       str(tmp_path / "bundle"), "--tests", str(tests)])
+    assert result.exit_code == 0, result.output
+    assert Path(seen["tests"]) == tests and Path(seen["dest"]) == tmp_path / "bundle"
+    result = CliRunner().invoke(main, ["course", "release", "--student",
+                                       str(tmp_path / "bundle2")])
+    assert result.exit_code == 0, result.output
+    assert Path(seen["tests"]) == course.GRADING_TESTS_DIR
+    refused = CliRunner().invoke(main, ["course", "release", "--check", "--tests", str(tests)])
+    assert refused.exit_code != 0 and "--tests" in refused.output
+
+
 # ---------------------------------------------------------------- running the notebooks
 
 
@@ -250,6 +393,10 @@ def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path,
     assert time.perf_counter() - started < 240, f"{path.name} is too slow on the fast budget"
 
 
+# Exercises whose solution calls earlier answers of its notebook: graded right only with them
+USES_EARLIER = {"count_not_worse": ("done_interval", "paper_verdict")}
+
+
 def class_of(root: Path, n_students: int = 30) -> dict[str, dict[str, float]]:
     """``n_students`` copies of lessons/ with mixed answers (each exercise solved, left
     unsolved or answered wrongly, by a mutant of the mutation suite); one student hands in
@@ -268,6 +415,7 @@ def class_of(root: Path, n_students: int = 30) -> dict[str, dict[str, float]]:
         name = f"student{i:02d}"
         (root / name).mkdir(parents=True)
         expected[name] = {}
+        chosen: dict[str, int] = {}
         for path in course.notebooks_in(LESSONS):
             if i == n_students - 1 and path == course.notebooks_in(LESSONS)[-1]:
                 expected[name].update({e["exercise"]: 0 for e in course.exercises(SOLUTIONS)
@@ -281,6 +429,9 @@ def class_of(root: Path, n_students: int = 30) -> dict[str, dict[str, float]]:
                 exercise = info["exercise"]
                 j = list(points).index(exercise)
                 choice = (7 * i + 3 * j) % 4  # 0: unsolved, 1-2: solved, 3: a wrong answer
+                if any(chosen.get(d) not in (1, 2) for d in USES_EARLIER.get(exercise, ())):
+                    choice = 0  # its answer calls one this student did not get right
+                chosen[exercise] = choice
                 got = 0
                 if choice in (1, 2):
                     cell["source"] = solved[exercise].splitlines(keepends=True)
@@ -301,9 +452,11 @@ def test_grading_a_class_of_30_gives_the_right_csv(tmp_path):
                                        "--out", str(out), "--jobs", "2"])
     elapsed = time.perf_counter() - started
     assert result.exit_code == 0, result.output
+    texts = [f"{e['exercise']}_text" for e in course.exercises(SOLUTIONS) if e["kind"] == "text"]
     with out.open(newline="") as f:
         reader = csv.DictReader(f)
-        assert reader.fieldnames == ["student", *catalog(), "total", "max_total", "error"]
+        assert reader.fieldnames == ["student", *catalog(), "total", "max_total", "error",
+                                     *texts]
         rows = {row["student"]: row for row in reader}
     assert list(rows) == sorted(expected)
     for student, points in expected.items():

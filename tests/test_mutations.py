@@ -41,6 +41,9 @@ _ALLREDUCE = ("    flat = torch.cat([p.grad.reshape(-1) for p in params]).numpy(
               "    offset = 0\n    for p in params:\n        k = p.numel()\n"
               "        p.grad.copy_(torch.from_numpy(total[offset:offset + k]).view_as(p))\n")
 
+# a written answer's mutants replace the whole answer (the cell but its first-line comment)
+WHOLE_ANSWER = "<the whole answer>"
+
 # exercise -> [(the mistake, text of the solution, replaced by[, points expected])]
 MUTANTS: dict[str, list[tuple]] = {
     "discounted_return": [
@@ -195,6 +198,34 @@ MUTANTS: dict[str, list[tuple]] = {
         ("reward of the wrong sign", '"rew": (-distance)', '"rew": (distance)'),
         ("goal taken from obs, not next_obs", "goals = achieved_next[goal_steps]",
          "goals = obs[:, -2 * width:-width].reshape(len(obs), n_nodes, 3)[goal_steps]")],
+    "done_interval": [
+        ("normal approximation",
+         "z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator",
+         "z * math.sqrt(p * (1 - p) / n)"),
+        ("fractions, not percent", "return 100 * max(0.0, centre - half), 100 * min(1.0, centre + half)",
+         "return max(0.0, centre - half), min(1.0, centre + half)"),
+        ("done % taken as the count of successes", "k = round(done_percent * n / 100)",
+         "k = min(round(done_percent), n)")],
+    "paper_verdict": [
+        ("names read from the paper's side", 'return "above"\n    if paper_done > high:\n'
+         '        return "below"', 'return "below"\n    if paper_done > high:\n        return "above"'),
+        ("the interval's ends excluded", "if paper_done < low:", "if paper_done <= low:")],
+    "count_not_worse": [
+        ("counts only the cells it cannot tell apart", '!= "below"', '== "within"'),
+        ("counts the cells where ours is worse", '!= "below"', '== "below"')],
+    "prediction_cells": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "About six cells.")],
+    "prediction_factor": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "The threshold.")],
+    "analysis_comparison": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "Ours are worse than the paper's in most cells, because "
+         "they were trained on far fewer transitions.")],
+    "analysis_next_step": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("empty", WHOLE_ANSWER, "")],
 }
 def notebook_exercises() -> dict[str, list[str]]:
     """Solution notebook stem -> its exercises, in order."""
@@ -224,10 +255,14 @@ def mutant_notebook(stem: str, folder: Path, k: int) -> dict[str, tuple]:
     path = SOLUTIONS / f"{stem}.ipynb"
     nb = course.read_notebook(path)
     for cell in nb["cells"]:
-        info = course.exercise_info(cell)
+        info = course.graded_info(cell)
         if info and len(MUTANTS.get(info["exercise"], ())) > k:
             mutant = MUTANTS[info["exercise"]][k]
-            source = mutate(course.cell_source(cell), mutant[1], mutant[2])
+            if mutant[1] == WHOLE_ANSWER:  # keep only the written answer's first line
+                first = course.cell_source(cell).split("\n", 1)[0]
+                source = f"{first}\n{mutant[2]}" if mutant[2] else first
+            else:
+                source = mutate(course.cell_source(cell), mutant[1], mutant[2])
             cell["source"] = source.splitlines(keepends=True)
             applied[info["exercise"]] = mutant
     course.write_notebook(nb, folder / path.name)

@@ -132,6 +132,9 @@ def pytest_runtest_logreport(report):
         elif " (not loaded):" in text:
             record["outcome"] = "not loaded"
         record["earned"] = 0
+        if not record.get("message"):  # the first failure says the most
+            crash = getattr(report.longrepr, "reprcrash", None)
+            record["message"] = crash.message if crash is not None else str(report.longrepr)
     elif report.skipped:
         record["outcome"], record["earned"] = "skipped", 0
     elif report.when == "call" and record["outcome"] == "not run":
@@ -147,6 +150,10 @@ def _grade_items() -> list[dict]:
         entry["points"] += record["points"]
         entry["earned"] += record["earned"]
         entry["outcomes"].append(record["outcome"])
+        if record.get("message") and not entry.get("message"):
+            entry["message"] = record["message"]
+        if "text" in record:
+            entry["text"] = record["text"]
     items = []
     for entry in merged.values():
         outcomes = entry.pop("outcomes")
@@ -303,3 +310,42 @@ def student(request):
     marker = request.node.get_closest_marker("exercise")
     return load_student(request.config, notebook, marker.args[0],
                         marker.kwargs.get("reference", ()))
+
+
+class WrittenAnswer:
+    """A written answer (a Markdown cell) of the student's notebook: its text, never run.
+
+    Scored for presence and length only (:func:`dlo_course.course.written_answer_problem`);
+    the text goes verbatim into the grades (``--grades-json``, the class CSV) for the
+    instructor to read."""
+
+    def __init__(self, name: str, text: str, min_words: int):
+        self.name, self.text, self.min_words = name, text, min_words
+
+    def check(self) -> None:
+        from dlo_course.course import written_answer_problem
+
+        problem = written_answer_problem(self.text, self.min_words)
+        if problem:
+            pytest.fail(f"{self.name}: {problem}", pytrace=False)
+
+
+@pytest.fixture
+def written_answer(request):
+    """The graded written answer (the test's ``exercise`` marker) as a :class:`WrittenAnswer`;
+    its text is recorded with the grades, even when it is too short."""
+    from dlo_course.course import ExerciseError, find_notebook, written_answers
+
+    notebook = request.node.get_closest_marker("notebook").args[0]
+    name = request.node.get_closest_marker("exercise").args[0]
+    try:
+        answers = written_answers(find_notebook(notebooks_dir(request.config), notebook))
+    except (ExerciseError, ValueError, OSError) as err:
+        pytest.fail(str(err), pytrace=False)
+    if name not in answers:
+        pytest.fail(f"{notebook}.ipynb: no written-answer cell for {name!r} (keep the cell "
+                    f"and its first line <!-- answer: {name} ... -->)", pytrace=False)
+    record = _GRADES.get(request.node.nodeid)
+    if record is not None:
+        record["text"] = answers[name]["text"]
+    return WrittenAnswer(name, answers[name]["text"], answers[name]["min_words"])
