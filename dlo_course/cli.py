@@ -98,23 +98,52 @@ def plot_boxes(out: Path) -> None:
 
 
 @main.command()
-@click.option("--nodes", "n_nodes", type=NODE_COUNTS, default="4",
-              show_default=True, help="Number of selected mesh nodes.")
-@click.option("--goals", type=click.Choice(GOAL_SOURCES),
-              default="small", show_default=True,
-              help="Goal set: a whole database, or the paper's test goals drawn from it.")
-@click.option("--steps", type=click.IntRange(1, 10_000), default=30, show_default=True)
+@click.option("--agent", type=click.Path(path_type=Path), default=None,
+              help="Watch a trained agent (a run directory or agent folder holding actor.pt, "
+                   "or the file), e.g. data/checkpoints/nodes4. Default: random actions.")
+# The names of CONTROLLER_NAMES below (defined with the evaluate command).
+@click.option("--controller", type=click.Choice(["jacobian"]), default=None,
+              help="Watch a classical controller instead (dlo_course.jacobian).")
+@click.option("--nodes", "n_nodes", type=NODE_COUNTS, default=None,
+              help="Number of selected mesh nodes [4; an agent's: inferred].")
+@click.option("--goals", "--database", "goals", type=click.Choice(GOAL_SOURCES),
+              default=None, help="Goal set: a whole database, or the paper's test goals "
+              "drawn from it [small; with --agent or --controller: small-test].")
+@click.option("--goal-index", "goal_indices", type=click.IntRange(min=0), multiple=True,
+              help="Goal of an episode; repeat it for several episodes [with --agent or "
+                   "--controller: 15, a small-test goal the shipped 4-node agent reaches; "
+                   "else drawn from --seed].")
+@click.option("--episodes", type=click.IntRange(min=1), default=None,
+              help="Instead of --goal-index: this many episodes on the goals the evaluation "
+                   "draws with --seed.")
+@click.option("--steps", type=click.IntRange(1, 10_000), default=30, show_default=True,
+              help="At most this many actions per episode.")
 @click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--width", type=click.IntRange(min=16), default=None,
+              help="Frame width in pixels [480].")
+@click.option("--height", type=click.IntRange(min=16), default=None,
+              help="Frame height in pixels [360].")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path),
               default=Path("reports/demo.png"), show_default=True,
-              help="PNG of the first and last frames; a GIF of the episode is written beside it.")
-def demo(n_nodes: str, goals: str, steps: int, seed: int, out: Path) -> None:
-    """Run one episode with random actions and save pictures of it."""
+              help="PNG of the first and last frames; a GIF of every episode is written "
+                   "beside it, and an MP4 if ffmpeg is installed.")
+def demo(agent: Path | None, controller: str | None, n_nodes: str | None, goals: str | None,
+         goal_indices: tuple[int, ...], episodes: int | None, steps: int, seed: int,
+         width: int | None, height: int | None, out: Path) -> None:
+    """Render episodes headless (random actions, a trained agent or a controller) and save
+    pictures and a video of them, P_c and P_d marked, the mean node distance on every frame."""
     from dlo_course.demo import run_demo
 
+    if agent is not None and controller is not None:
+        raise click.UsageError("give --agent or --controller (not both)")
+    if goal_indices and episodes:
+        raise click.UsageError("give --goal-index or --episodes (not both)")
     try:
-        summary = run_demo(n_nodes=int(n_nodes), goals=goals, steps=steps, seed=seed, out=out)
-    except (DatabaseError, FileNotFoundError) as err:
+        summary = run_demo(n_nodes=None if n_nodes is None else int(n_nodes), goals=goals,
+                           steps=steps, seed=seed, out=out, agent=agent,
+                           controller=controller, goal_indices=goal_indices,
+                           episodes=episodes, width=width, height=height)
+    except (DatabaseError, FileNotFoundError, ValueError) as err:  # TrainedAgentError too
         raise click.ClickException(str(err)) from None
     click.echo(summary)
 

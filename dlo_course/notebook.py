@@ -4,14 +4,35 @@ Every lesson imports these two, and nothing else of the grading machinery: ``fro
 dlo_course.notebook import fast_mode, output_dir``. (``dlo_course.course`` re-exports them for
 notebooks written before this module existed.) Exercise cells may use them too: they hold no
 answer.
+
+Also here: what runs the lessons in the browser, the Colab install cell
+(:func:`colab_install_command`, :func:`install_cell_source`) and the Colab and Binder links
+(:func:`colab_url`, :func:`binder_url`), all from one address, :data:`REPOSITORY_URL`.
 """
 
 from __future__ import annotations
 
+import json
 import os
+import sys
 from pathlib import Path
+from urllib.parse import quote
 
 from dlo_course.paths import REPO_ROOT
+
+REPOSITORY_URL = "https://github.com/dlo-course/dlo-course"
+"""The course's public repository, from which Colab installs it and Binder builds it. A
+placeholder: a fork changes it here, then runs ``python binder/update_links.py`` (the
+lessons' install cell and the badges of ``lessons/README.md``) and ``dlo-course course
+release``, and edits the badge line of ``README.md`` by hand."""
+
+REPOSITORY_BRANCH = "main"
+"""The branch that Colab's and Binder's links open."""
+
+COLAB_CHECKOUT = "/content/dlo-course"
+"""Where the install cell clones the course in Colab (``/content`` is Colab's working
+folder). A clone, not a plain ``pip install`` of the package: the data, the shipped agents
+and the benchmarks' results the lessons read live in the repository, beside the package."""
 
 
 def fast_mode() -> bool:
@@ -67,3 +88,65 @@ def markdown_tables(path: str | Path, raw: bool = False) -> list:
                 tables.append([dict(zip(header, cells(row))) for row in block[2:]])
         block = []
     return tables
+
+
+# ------------------------------------------------------------------ Colab and Binder
+
+
+def colab_install_command(modules=None) -> str | None:
+    """The shell command that installs the course when a lesson runs in Google Colab, or
+    None anywhere else (a local install or Binder already has it).
+
+    Colab is recognised by its ``google.colab`` module. The command clones the repository
+    (once: a second run of the cell keeps the clone) and installs it editable with the
+    ``mpi`` extra, *without* ``constraints.txt``: its pin asks for the CPU build of torch,
+    and Colab brings its own torch, which satisfies ``torch>=2.1``. Nor the ``notebooks``
+    extra: Colab has its own Jupyter, which must not be upgraded under it.
+
+    Args:
+        modules: the loaded modules to look in (default ``sys.modules``; tests pass their own).
+    """
+    modules = sys.modules if modules is None else modules
+    if "google.colab" not in modules:
+        return None
+    return (f"( [ -d {COLAB_CHECKOUT} ] || git clone --quiet --depth 1 --branch "
+            f"{REPOSITORY_BRANCH} {REPOSITORY_URL} {COLAB_CHECKOUT} ) && "
+            f"pip install --quiet -e '{COLAB_CHECKOUT}[mpi]'")
+
+
+def install_cell_source() -> str:
+    """The source of every lesson's first code cell: in Colab, run
+    :func:`colab_install_command` and make the clone importable at once; elsewhere nothing.
+
+    The cell cannot import this module (in Colab the course is not installed yet when it
+    runs), so it carries the command as text; ``binder/update_links.py`` writes it into the
+    notebooks and the tests check that they hold exactly this.
+    """
+    command = colab_install_command({"google.colab": None})
+    return (
+        "# Google Colab only: install the course (a minute or two). Elsewhere this does nothing.\n"
+        "import sys\n"
+        "\n"
+        'if "google.colab" in sys.modules:\n'
+        "    import subprocess\n"
+        "\n"
+        f"    subprocess.run({json.dumps(command)}, shell=True, check=True)\n"
+        "    # pip's editable install is seen by a new kernel only; this one needs the path.\n"
+        f"    sys.path.insert(0, {json.dumps(COLAB_CHECKOUT)})"
+    )
+
+
+def colab_url(notebook: str) -> str:
+    """The address that opens ``notebook`` (a path in the repository, e.g.
+    ``lessons/01_rl_and_the_bellman_equation.ipynb``) in Google Colab."""
+    repository = REPOSITORY_URL.removeprefix("https://github.com/")
+    return (f"https://colab.research.google.com/github/{repository}/blob/"
+            f"{REPOSITORY_BRANCH}/{notebook}")
+
+
+def binder_url(notebook: str | None = None) -> str:
+    """The address that builds the repository on mybinder.org (from ``binder/``) and opens
+    ``notebook`` in JupyterLab, or the lessons folder when None."""
+    repository = REPOSITORY_URL.removeprefix("https://github.com/")
+    where = f"labpath={quote(notebook, safe='')}" if notebook else "urlpath=lab/tree/lessons"
+    return f"https://mybinder.org/v2/gh/{repository}/{REPOSITORY_BRANCH}?{where}"

@@ -5,8 +5,9 @@
   over seeds: :func:`seed_groups`, :func:`seed_curve`);
 * Fig. 5, an agent deforming the rod to a goal outside its training box:
   :func:`plot_deformation`;
-* an episode's first and last frames, and all of them as a GIF: :func:`plot_episode_frames`,
-  :func:`save_gif` (``dlo-course demo``);
+* an episode's first and last frames, and all of them as a GIF (and an MP4 where an encoder
+  is installed), each frame captioned: :func:`plot_episode_frames`, :func:`caption_frame`,
+  :func:`save_gif`, :func:`save_mp4` (``dlo-course demo``);
 * the pieces: :func:`plot_rod`, :func:`draw_box`.
 
 The figures made here are :class:`matplotlib.figure.Figure` objects outside pyplot (except
@@ -308,13 +309,108 @@ def plot_episode_frames(first: np.ndarray, last: np.ndarray, titles: tuple[str, 
     return fig
 
 
-def save_gif(frames: list[np.ndarray], path: str | Path, fps: int = 10) -> Path:
-    """Write RGB frames (H, W, 3) uint8 as an animated GIF (Pillow ships with matplotlib)."""
-    from PIL import Image  # only here: the one use of Pillow
+def save_gif(frames: list[np.ndarray], path: str | Path, fps: int = 10,
+             hold: Sequence[int] = (), hold_seconds: float = 1.5) -> Path:
+    """Write RGB frames (H, W, 3) uint8 as an animated GIF (Pillow ships with matplotlib).
+
+    Args:
+        hold: indices of frames shown for ``hold_seconds`` instead of one frame's time, e.g.
+            the last frame of each episode, so that a viewer can read where it ended.
+    """
+    from PIL import Image  # Pillow: a dependency of matplotlib, so always installed
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     images = [Image.fromarray(f) for f in frames]
-    images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps),
+    durations = [int(1000 / fps)] * len(frames)
+    for k in hold:
+        durations[k] = int(1000 * hold_seconds)
+    images[0].save(path, save_all=True, append_images=images[1:], duration=durations,
                    loop=0)
+    return path
+
+
+def caption_frame(frame: np.ndarray, lines: Sequence[str]) -> np.ndarray:
+    """A rendered frame with ``lines`` of text on a white band above it (the demo writes the
+    mean node distance on every frame this way).
+
+    A band rather than text over the picture: at small sizes any corner of the camera's view
+    holds part of the robot, and the caption must hide nothing. The font scales with the
+    frame's height, and the band's height depends only on that and the number of lines, so
+    every frame of a video gets the same size.
+
+    Returns:
+        (H + band, W, 3) uint8.
+    """
+    from PIL import Image, ImageDraw, ImageFont
+
+    frame = np.asarray(frame, dtype=np.uint8)
+    height, width = frame.shape[:2]
+    size = max(8, height // 24)
+    try:
+        font = ImageFont.load_default(size=size)
+    except TypeError:  # Pillow < 10.1: one bitmap size only
+        font = ImageFont.load_default()
+    margin = max(2, size // 3)
+    line_height = size + margin
+    band = Image.new("RGB", (width, 2 * margin + line_height * len(lines)), "white")
+    draw = ImageDraw.Draw(band)
+    for k, line in enumerate(lines):
+        draw.text((margin, margin + k * line_height), line, font=font, fill="black")
+    return np.concatenate([np.asarray(band), frame], axis=0)
+
+
+def video_encoder() -> str | None:
+    """The ffmpeg program to write MP4 with: one on the ``PATH``, else the one the optional
+    ``imageio-ffmpeg`` package brings; None if neither is installed (the course does not
+    depend on either: a GIF is always written)."""
+    import shutil
+
+    found = shutil.which("ffmpeg")
+    if found:
+        return found
+    try:
+        import imageio_ffmpeg
+    except ImportError:
+        return None
+    try:
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except RuntimeError:  # the package without its binary
+        return None
+
+
+def save_mp4(frames: list[np.ndarray], path: str | Path, fps: int = 10, hold: Sequence[int] = (),
+             hold_seconds: float = 1.5, encoder: str | None = None) -> Path | None:
+    """Write RGB frames (H, W, 3) uint8 as an H.264 MP4 through ffmpeg, if there is one.
+
+    Args:
+        hold: indices of frames repeated to last ``hold_seconds`` (see :func:`save_gif`).
+        encoder: the ffmpeg program; default :func:`video_encoder`.
+
+    Returns:
+        the path written, or None when no encoder is installed.
+    """
+    import subprocess
+
+    encoder = encoder or video_encoder()
+    if encoder is None:
+        return None
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    height, width = frames[0].shape[:2]
+    repeats = [1] * len(frames)
+    for k in hold:
+        repeats[k] = max(1, round(hold_seconds * fps))
+    command = [encoder, "-y", "-loglevel", "error",
+               "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width}x{height}",
+               "-r", str(fps), "-i", "-",
+               # H.264 in yuv420p needs even sides; players outside ffmpeg need yuv420p.
+               "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264",
+               "-pix_fmt", "yuv420p", str(path)]
+    stream = b"".join(np.ascontiguousarray(f, dtype=np.uint8).tobytes() * n
+                      for f, n in zip(frames, repeats))
+    result = subprocess.run(command, input=stream, capture_output=True, check=False)
+    if result.returncode != 0:
+        raise RuntimeError(f"ffmpeg could not write {path}: "
+                           f"{result.stderr.decode(errors='replace').strip()}")
     return path
