@@ -704,15 +704,21 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     feedback = out.parent / f"{out.stem}_feedback"
     logs.mkdir(parents=True, exist_ok=True)
     feedback.mkdir(parents=True, exist_ok=True)
-    from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures import ThreadPoolExecutor, as_completed
 
-    def grade_one(k: int, student: Path) -> dict[str, Any]:
-        if progress:
-            print(f"[{k}/{len(students)}] grading {student.name} ...", file=sys.stderr, flush=True)
-        return grade_folder(student, tests, timeout)
+    from tqdm.auto import tqdm
 
-    with ThreadPoolExecutor(max_workers=max(1, int(jobs))) as pool:
-        reports = list(pool.map(grade_one, range(1, len(students) + 1), students))
+    # Threads are enough: each student is graded by its own processes, the threads only wait.
+    reports: list[dict[str, Any]] = [{}] * len(students)
+    with ThreadPoolExecutor(max_workers=max(1, int(jobs))) as pool, \
+            tqdm(total=len(students), unit="student", desc="grading",
+                 disable=not progress, file=sys.stderr) as bar:
+        futures = {pool.submit(grade_folder, student, tests, timeout): i
+                   for i, student in enumerate(students)}
+        for future in as_completed(futures):
+            reports[futures[future]] = future.result()
+            bar.set_postfix(last=students[futures[future]].name)
+            bar.update(1)
     rows = []
     for student, report in zip(students, reports):
         (logs / f"{student.name}.txt").write_text(report["output"], encoding="utf-8")

@@ -534,3 +534,26 @@ def test_students_can_grade_themselves_with_the_bundle(tmp_path):
         assert sorted(earned) == names, proc.stdout[-3000:]
         assert all(earned.values()) if expected == "all" else not any(earned.values()), \
             proc.stdout[-3000:]
+
+
+def test_parallel_grading_gives_the_serial_csv_and_feedback(tmp_path):
+    """--jobs only changes how many students are graded at once: the CSV, the logs' verdicts
+    and the feedback sheets are those of a serial run (three students, one lesson each)."""
+    import shutil
+
+    first = course.notebooks_in(SOLUTIONS)[0].name
+    for name, source in (("ann", SOLUTIONS), ("bob", LESSONS), ("cy", SOLUTIONS)):
+        (tmp_path / "class" / name).mkdir(parents=True)
+        shutil.copy(source / first, tmp_path / "class" / name / first)
+    outputs = {}
+    for jobs in (1, 2):
+        out = tmp_path / f"jobs{jobs}" / "grades.csv"
+        out.parent.mkdir()
+        course.grade(tmp_path / "class", out, progress=False, jobs=jobs)
+        sheets = sorted((out.parent / "grades_feedback").iterdir())
+        feedback = {p.name: p.read_text() for p in sheets}
+        outputs[jobs] = (out.read_text(), feedback)
+    assert outputs[1] == outputs[2]
+    with (tmp_path / "jobs2" / "grades.csv").open(newline="") as f:
+        totals = {row["student"]: float(row["total"]) for row in csv.DictReader(f)}
+    assert totals["bob"] == 0 and totals["ann"] == totals["cy"] > 0
