@@ -181,6 +181,14 @@ class TrainConfig:
     training episode starts from the shape the previous one ended in and only a new goal is
     drawn (the authors' code). The first episode, and any after a simulation blow-up, start
     from a rebuilt world anyway. False needs ``DLOShape-v0``, whose reset can keep the shape."""
+    stop_at_goal: bool = False
+    """True: a training episode ends as soon as the goal is reached (the course's first
+    recipes). False: every episode runs all ``steps_per_episode`` actions, and reaching the
+    goal only stops the Bellman bootstrap (done = 1 in the buffer): the paper ("each agent
+    makes 300 actions") and the authors' code. Running on fills the buffer with what happens
+    *after* the goal is reached: states close to the goal, where precision is learned.
+    A ``config.json`` written before this option existed reads as True, its trainer's
+    behaviour."""
     validate_every: int = bounded(0, 0)
     """Every this many episodes, run the deterministic actor on ``validation_goals`` held-out
     goals (:func:`validate`) and keep the best actor in ``best_actor.pt`` (0: never, as in
@@ -230,6 +238,9 @@ class TrainConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TrainConfig":
+        d = dict(d)
+        # Runs recorded before stop_at_goal existed ended their episodes at the goal.
+        d.setdefault("stop_at_goal", True)
         return cls(**d)
 
 
@@ -264,6 +275,7 @@ _PRESETS = {
                      "first round's agents",
                      TrainConfig(episodes=240, steps_per_episode=60, checkpoint_every=10,
                                  out_dir="runs/course", expected_agents=2, updates_per_step=2,
+                                 stop_at_goal=True,
                                  ddpg=DDPGConfig(normalize_obs=True, preactivation_l2=0.01,
                                                  noise_sigma=0.15))),
     # A first guess to be tuned by the ablation of issue 12: the course preset's options on
@@ -278,7 +290,8 @@ _PRESETS = {
                      TrainConfig(env_kwargs={"n_nodes": 4}, episodes=500, steps_per_episode=60,
                                  checkpoint_every=10, out_dir="runs/recipe",
                                  expected_agents=2, updates_per_step=2, her_k=4,
-                                 reset_between_episodes=False, validate_every=20,
+                                 reset_between_episodes=False, stop_at_goal=True,
+                                 validate_every=20,
                                  validation_goals=30,
                                  ddpg=DDPGConfig(normalize_obs=True, preactivation_l2=0.01,
                                                  noise_sigma=0.15, batch_size=256,

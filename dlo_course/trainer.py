@@ -14,7 +14,8 @@ One episode of one agent:
         when this agent's episode ends: store its hindsight copies (if her_k > 0)
         once every agent's buffer holds a batch: updates_per_step DDPG updates
             (gradients all-reduced)
-        stop when the episode ends (terminated or truncated) for *every* agent
+        stop when the episode ends (truncated by the step limit, or the goal reached if
+            stop_at_goal) for *every* agent
 
 An agent whose episode ended early keeps making updates (from its own buffer) until the
 slowest agent is done: an all-reduce is collective, so if one rank skipped an update the
@@ -120,7 +121,7 @@ def run_episode(env: gymnasium.Env, agent: DDPG, buffer: ReplayBuffer, noise: OU
     warmup = config.warmup or config.ddpg.batch_size
     obs, info = env.reset(seed=seed, options=reset_options(env, config))
     noise.reset()
-    total_reward, length, running = 0.0, 0, True
+    total_reward, length, running, reached = 0.0, 0, True, False
     stats: list[dict[str, float]] = []
     episode = []  # (obs, action, reward, next_obs) of each step, for hindsight relabelling
     for _ in range(config.steps_per_episode):
@@ -136,7 +137,8 @@ def run_episode(env: gymnasium.Env, agent: DDPG, buffer: ReplayBuffer, noise: OU
             obs = next_obs
             total_reward += float(reward)
             length += 1
-            running = not (terminated or truncated)
+            reached = reached or bool(info.get("is_success", False))
+            running = not (truncated or (terminated and config.stop_at_goal))
             if not running and relabeller is not None:
                 _add_hindsight_copies(buffer, relabeller, episode)
         # Learn once every agent holds a batch; decided together because updates are collective.
@@ -157,7 +159,8 @@ def run_episode(env: gymnasium.Env, agent: DDPG, buffer: ReplayBuffer, noise: OU
         "reward": total_reward,
         "length": float(length),
         "distance": float(info.get("distance", math.nan)),
-        "success": float(info["is_success"]) if "is_success" in info else math.nan,
+        # reached at some step: with stop_at_goal=False the episode runs on past the goal
+        "success": float(reached) if "is_success" in info else math.nan,
         "updates": float(len(stats)),
         "critic_loss": mean_of("critic_loss"),
         "policy_loss": mean_of("policy_loss"),
