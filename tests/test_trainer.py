@@ -134,13 +134,22 @@ def test_run_writes_its_files(tmp_path):
 
 
 def test_done_mask_is_terminated_and_env_info_is_logged(tmp_path):
-    config = tiny(tmp_path, env_id="test/ReachAtStep3-v0", episodes=2, steps_per_episode=10)
+    config = tiny(tmp_path, env_id="test/ReachAtStep3-v0", episodes=2, steps_per_episode=10,
+                  stop_at_goal=True)
     env = make_env(config)
     agent = DDPG(2, 3, -1.0, 1.0, config.ddpg)
     buffer = ReplayBuffer(2, 3, 100, seed=0)
     stats = run_episode(env, agent, buffer, OUNoise(3, seed=0), config, 0, None)
     assert (stats["length"], stats["distance"], stats["success"]) == (3, pytest.approx(0.1 / 3), 1)
     np.testing.assert_array_equal(buffer.done[:3], [0, 0, 1])
+
+    # The paper's episodes run on past the goal: all 10 steps, done = 1 only where reached,
+    # and the episode counts as a success because the goal was reached on the way.
+    config = dataclasses.replace(config, stop_at_goal=False)
+    buffer = ReplayBuffer(2, 3, 100, seed=0)
+    stats = run_episode(env, agent, buffer, OUNoise(3, seed=0), config, 0, None)
+    assert (stats["length"], stats["distance"], stats["success"]) == (10, pytest.approx(0.01), 1)
+    np.testing.assert_array_equal(buffer.done[:10], [0, 0, 1, 0, 0, 0, 0, 0, 0, 0])
 
     # a time limit (truncation) is not a terminal state
     config = tiny(tmp_path, steps_per_episode=5)
@@ -150,7 +159,8 @@ def test_done_mask_is_terminated_and_env_info_is_logged(tmp_path):
                         config, 0, None)
     assert stats["length"] == 5 and len(buffer) == 5 and not buffer.done[:5].any()
 
-    out = train(tiny(tmp_path, "reach", env_id="test/ReachAtStep3-v0", episodes=2), progress=False)
+    out = train(tiny(tmp_path, "reach", env_id="test/ReachAtStep3-v0", episodes=2,
+                     stop_at_goal=True), progress=False)
     rows = read_rows(out)
     assert [r["success_rate"] for r in rows] == ["1", "1"]
     assert float(rows[0]["distance_mean"]) == pytest.approx(0.1 / 3)
@@ -265,7 +275,8 @@ def test_updates_per_step_and_observation_scaling_from_a_bounded_space(tmp_path)
 
 # --- the training levers of issue 12 (all off by default and in the paper preset) ---
 
-LEVER_DEFAULTS = {"her_k": 0, "reset_between_episodes": True, "updates_per_step": 1}
+LEVER_DEFAULTS = {"her_k": 0, "reset_between_episodes": True, "updates_per_step": 1,
+                  "stop_at_goal": False}
 TD3_DEFAULTS = {"twin_critics": False, "policy_delay": 1, "target_noise": 0.0}
 
 
@@ -290,7 +301,8 @@ def test_recipe_preset():
     assert recipe.env_id == "DLOShape-v0" and recipe.env_kwargs == {"n_nodes": 4}
     assert (recipe.episodes, recipe.steps_per_episode, recipe.checkpoint_every,
             recipe.expected_agents, recipe.updates_per_step, recipe.her_k,
-            recipe.reset_between_episodes, recipe.reduce) == (500, 60, 10, 2, 2, 4, False, "sum")
+            recipe.reset_between_episodes, recipe.reduce, recipe.stop_at_goal) == \
+        (500, 60, 10, 2, 2, 4, False, "sum", True)
     assert (recipe.validate_every, recipe.validation_goals, recipe.validation_steps) == (20, 30, 30)
     assert PRESETS["paper"].validate_every == 0  # the paper kept its last actor
     d = recipe.ddpg
@@ -371,14 +383,24 @@ def test_levers_are_recorded_and_set_from_the_command_line(tmp_path):
     train(tiny(tmp_path, "old", episodes=1), progress=False)
     shared_old = tmp_path / "old" / "checkpoints" / "episode000001" / "shared.pt"
     blob = torch.load(shared_old, weights_only=False)
-    for key in ("her_k", "reset_between_episodes"):
+    for key in ("her_k", "reset_between_episodes", "stop_at_goal"):
         del blob["config"][key]
     for key in ("twin_critics", "policy_delay", "target_noise", "target_noise_clip"):
         del blob["config"]["ddpg"][key]
     del blob["agent"]["updates"]
     torch.save(blob, shared_old)
-    train(tiny(tmp_path, "old", episodes=2), resume=True, progress=False)
+    # Its episodes stopped at the goal (no stop_at_goal then): resuming them to run on past
+    # the goal would change the run, so only the old behaviour resumes.
+    with pytest.raises(ValueError, match="stop_at_goal"):
+        train(tiny(tmp_path, "old", episodes=2), resume=True, progress=False)
+    train(tiny(tmp_path, "old", episodes=2, stop_at_goal=True), resume=True, progress=False)
     assert len(read_rows(tmp_path / "old")) == 2
+    # A config.json from before stop_at_goal reads as its trainer behaved: episodes stopped.
+    saved = json.loads((tmp_path / "old" / "config.json").read_text())
+    del saved["config"]["stop_at_goal"]
+    (tmp_path / "old" / "config.json").write_text(json.dumps(saved))
+    assert load_config(tmp_path / "old").stop_at_goal is True
+    assert TrainConfig.from_dict({}).stop_at_goal is True and TrainConfig().stop_at_goal is False
 
     # The preset's value is the default; a lever on the wrong environment is a clear error.
     result = CliRunner().invoke(main, ["train", "--env", "Pendulum-v1", "--keep-shape",
