@@ -491,20 +491,36 @@ CONTROLLER_NAMES = click.Choice(["jacobian"])
               help="Nodes the agent must have been trained for (default: inferred), or the "
                    "controller's (default 4).")
 @click.option("--time-mode", type=TIME_MODES, default="code", show_default=True)
+@click.option("--perturb", "perturbations", multiple=True, metavar="NAME=FACTOR",
+              help="Test in a perturbed world: scale a parameter of the rod relative to "
+                   "training, e.g. youngs_modulus=1.3 (names: youngs_modulus, mass, damping, "
+                   "edge_damping); repeat it for several (dlo_course.robustness).")
+@click.option("--obs-noise", type=float, default=0.0, show_default=True,
+              help="Std (m) of Gaussian noise on the observed node positions P_c (the "
+                   "success test uses the true positions); seeded by --seed.")
 @click.option("--out", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Write the summary and every episode as JSON.")
 def evaluate(agent: Path | None, controller_name: str | None, goals: str,
              thresholds: tuple[float, ...], no_reinit: bool, episodes: int, max_steps: int,
-             seed: int, n_nodes: str | None, time_mode: str, out: Path | None) -> None:
+             seed: int, n_nodes: str | None, time_mode: str, perturbations: tuple[str, ...],
+             obs_noise: float, out: Path | None) -> None:
     """The paper's test protocol (Table I) for one trained agent or a classical controller;
     parallel under mpiexec."""
     import json
     from dataclasses import asdict
 
-    from dlo_course.evaluation import TrainedAgentError, evaluate_thresholds
+    from dlo_course.evaluation import TrainedAgentError
+    from dlo_course.robustness import evaluate_perturbed, parse_perturbation
 
     if (agent is None) == (controller_name is None):
         raise click.UsageError("give --agent or --controller (not both)")
+    try:
+        factors = dict(parse_perturbation(text) for text in perturbations)
+    except ValueError as err:
+        raise click.BadParameter(str(err), param_hint="--perturb") from None
+    if not obs_noise >= 0:  # also refuses nan
+        raise click.BadParameter(f"the noise std must be >= 0 (m), got {obs_noise}",
+                                 param_hint="--obs-noise")
     if controller_name is not None:
         from dlo_course.jacobian import CONTROLLERS
 
@@ -512,11 +528,12 @@ def evaluate(agent: Path | None, controller_name: str | None, goals: str,
         agent = CONTROLLERS[controller_name](int(n_nodes))
     thresholds = thresholds or (0.05,)
     try:
-        results = evaluate_thresholds(agent, goals, thresholds,
-                                      reinitialize=not no_reinit, episodes=episodes,
-                                      max_steps=max_steps, seed=seed,
-                                      n_nodes=None if n_nodes is None else int(n_nodes),
-                                      time_mode=time_mode)
+        results = evaluate_perturbed(agent, goals, thresholds, factors=factors,
+                                     obs_noise=obs_noise, noise_seed=seed,
+                                     reinitialize=not no_reinit, episodes=episodes,
+                                     max_steps=max_steps, seed=seed,
+                                     n_nodes=None if n_nodes is None else int(n_nodes),
+                                     time_mode=time_mode)
     except (TrainedAgentError, FileNotFoundError, ValueError) as err:
         raise click.ClickException(str(err)) from None
     written = {}
@@ -526,11 +543,17 @@ def evaluate(agent: Path | None, controller_name: str | None, goals: str,
         click.echo(f"{'with' if not no_reinit else 'without'} reinitialization, {goals} "
                    f"goals, threshold {threshold} m, {s.episodes} episodes of at most "
                    f"{max_steps} steps")
+        if factors or obs_noise:
+            click.echo("perturbed: " + ", ".join(
+                [f"{name} x {f:g}" for name, f in factors.items()]
+                + ([f"noise std {obs_noise:g} m on P_c"] if obs_noise else [])))
         click.echo(f"done {s.done_percent:.1f}% (95% CI {s.done_ci_low:.1f}-"
                    f"{s.done_ci_high:.1f}), final distance {s.mean_distance:.5f} +- "
                    f"{s.std_distance:.5f} m, best {s.best_distance:.5f} m")
         written[threshold] = {"threshold": threshold, "summary": s.as_dict(),
                               "episodes": [asdict(r) for r in records]}
+        if factors or obs_noise:
+            written[threshold]["perturbation"] = {"factors": factors, "obs_noise": obs_noise}
     if out is not None:
         out.parent.mkdir(parents=True, exist_ok=True)
         # One threshold: {"summary", "episodes"}; several: a list of those, with "threshold".
@@ -648,9 +671,16 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
                                  "pipeline in minutes (tiny training, 2 episodes per setting).")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--time-mode", type=TIME_MODES, default="code", show_default=True)
+@click.option("--controller", "controller_name", type=CONTROLLER_NAMES, default=None,
+              help="Also evaluate this classical controller ('jacobian', dlo_course.jacobian) "
+                   "on the paper's test goals, the same episodes as the agents': "
+                   "table1_<controller>.csv and .md, and a section of the report.")
+@click.option("--controller-cells", type=click.Choice(["with", "all"]), default="with",
+              show_default=True,
+              help="The controller's cells: those with reinitialisation, or all 24.")
 def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_steps: int | None,
               whole_database: str, retrain: bool, preset_name: str | None, seed: int,
-              time_mode: str) -> None:
+              time_mode: str, controller_name: str | None, controller_cells: str) -> None:
     """Regenerate the paper's Table I and Figs. 4-5 beside the published numbers."""
     from dlo_course.evaluation import TrainedAgentError
     from dlo_course.reproduce import reproduce as run
@@ -669,7 +699,8 @@ def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_ste
     try:
         report = run(out, checkpoints=checkpoints, episodes=episodes, max_steps=max_steps,
                      seed=seed, train_preset=preset_name if (retrain or smoke) else None,
-                     time_mode=time_mode, whole_database=whole_database)
+                     time_mode=time_mode, whole_database=whole_database,
+                     controller=controller_name, controller_cells=controller_cells)
     except (TrainedAgentError, DatabaseError, RunFileError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from None
     if report is not None:

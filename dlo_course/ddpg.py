@@ -133,6 +133,48 @@ def smoothed_target_action(action: torch.Tensor, noise: torch.Tensor, noise_clip
 
 
 @torch.no_grad()
+def td3_target(reward: torch.Tensor, next_obs: torch.Tensor, done: torch.Tensor, gamma: float,
+               actor_target: nn.Module, critic_targets: Sequence[nn.Module],
+               noise: torch.Tensor | None = None, noise_clip: float = 0.5) -> torch.Tensor:
+    """The critic's label with TD3's clipped double Q and target policy smoothing, written out
+    as one function: what :meth:`DDPG.update` computes (:meth:`DDPG.target_value`, then
+    :func:`bellman_target`) when ``twin_critics`` and ``target_noise`` are set (lesson 15).
+
+    y = r + gamma * (1 - d) * min_i Q'_i(s', a'),  a' = smoothed mu'(s') (with ``noise``).
+
+    Args:
+        reward, done: (B, 1) rewards and terminal flags.
+        next_obs: (B, obs_dim) next observations s'.
+        gamma: discount factor.
+        actor_target: the target actor mu' (an :class:`Actor`: its ``action_scale`` and
+            ``action_bias`` give the action bounds).
+        critic_targets: the target critics, one (DDPG) or two (TD3); the smallest value wins.
+        noise: (B, act_dim) the smoothing noise eps in units of the normalised action (TD3:
+            ``target_noise * N(0, 1)``), or ``None`` for the plain mu'(s').
+        noise_clip: c, the largest noise kept (:func:`smoothed_target_action`).
+
+    Returns:
+        (B, 1) targets, without gradient.
+    """
+    next_act = actor_target(next_obs)
+    if noise is not None:
+        next_act = smoothed_target_action(next_act, noise, noise_clip,
+                                          actor_target.action_scale, actor_target.action_bias)
+    next_q = critic_targets[0](next_obs, next_act)
+    for critic in critic_targets[1:]:
+        next_q = torch.min(next_q, critic(next_obs, next_act))
+    return bellman_target(reward, next_q, done, gamma)
+
+
+def actor_update_due(critic_updates: int, policy_delay: int) -> bool:
+    """TD3's delayed policy update: does the actor (and do the targets) take a step at this
+    update? ``critic_updates`` counts the critic updates so far, this one included (1 at
+    the first); with ``policy_delay`` d the actor steps at updates d, 2d, 3d, ... (every
+    update when d = 1, the paper's DDPG). :meth:`DDPG.update` decides with it."""
+    return critic_updates % policy_delay == 0
+
+
+@torch.no_grad()
 def polyak_update(target: nn.Module, source: nn.Module, tau: float) -> None:
     """Soft update, in place: W_T <- tau * W + (1 - tau) * W_T for every parameter.
 
@@ -476,7 +518,7 @@ class DDPG:
             self._step(self.critic2, self.critic2_optimizer, loss_q2, grad_reducer)
         self.updates += 1
         stats = {"critic_loss": loss_q.item(), "q_mean": q.mean().item()}
-        if self.updates % cfg.policy_delay != 0:
+        if not actor_update_due(self.updates, cfg.policy_delay):
             return stats  # TD3: the actor and the targets wait for the critics to settle
 
         # 3. Actor: follow the (just updated) critic uphill. The critic is frozen meanwhile:

@@ -15,6 +15,7 @@ from gymnasium import spaces
 
 from dlo_course.database import resolve_goals
 from dlo_course.mesh import selected_nodes
+from dlo_course.robustness import draw_factors, scale_params, validate_ranges
 from dlo_course.simulation import RodScene, SimParams
 
 ENV_ID = "DLOShape-v0"
@@ -111,6 +112,15 @@ class DLOShapeEnv(gym.Env):
       and the one to use; given, it overrides ``params.time_mode``.
     * ``params``: every physical and timing parameter (:class:`SimParams`), the paper's and
       the authors' values by default.
+    * ``randomize``: domain randomisation, off by default (None or ``{}``). A dict ``{name:
+      [low, high]}`` of factor ranges for fields of ``params`` (Young's modulus, mass,
+      damping, edge damping: :data:`dlo_course.robustness.PERTURBABLE`), e.g.
+      ``{"youngs_modulus": [0.7, 1.3]}``: every reset that rebuilds the world draws each
+      factor uniformly in its range and builds the rod with ``params`` scaled by them
+      (:func:`dlo_course.robustness.draw_factors`; the draw is in ``sim_factors``). The
+      draws come from their own generator, seeded by ``reset(seed=...)``, so a seeded run is
+      deterministic and gets the goals it would get without randomisation. A reset with
+      ``reinitialize=False`` keeps the rod, and so its factors.
 
     ## Version History
 
@@ -143,6 +153,7 @@ class DLOShapeEnv(gym.Env):
         render_mode: str | None = None,
         time_mode: str | None = None,
         params: SimParams | None = None,
+        randomize: dict[str, Any] | None = None,
     ) -> None:
         super().__init__()
         self.node_ids = np.array(selected_nodes(n_nodes))
@@ -157,6 +168,11 @@ class DLOShapeEnv(gym.Env):
         if time_mode is not None:
             params = params.with_(time_mode=time_mode)
         self.params = params
+        # Domain randomisation (off by default): factors drawn at every rebuilding reset.
+        self.randomize = validate_ranges(randomize or {})
+        self.sim_factors: dict[str, float] = {}
+        """The factors of the world in use (empty: the nominal ``params``)."""
+        self._randomizer = np.random.default_rng()
         self.goal_set = resolve_goals(goals, n_nodes)
 
         # Generous finite bounds: positions within 10 m of the origin, tip speed below
@@ -184,24 +200,49 @@ class DLOShapeEnv(gym.Env):
                              "use 'reinitialize' and/or 'goal_index'")
         rebuilt = bool(options.get("reinitialize", True) or self._last_obs is None
                        or self._broken)
+        if seed is not None:  # the randomiser's own stream: the goals stay as without it
+            self._randomizer = np.random.default_rng([seed, 0xD0])
         if rebuilt:
-            if not self._fresh:
+            if self.randomize:
+                self.sim_factors = draw_factors(self.randomize, self._randomizer)
+                self.scene.params = scale_params(self.params, self.sim_factors)
+                self.scene.build()
+            elif not self._fresh:
                 self.scene.build()
             self._broken = False
         self._fresh = False
-        self.scene.step_physics(self.params.reset_steps(self.n_nodes, rebuilt))
         if "goal_index" in options:
             index = int(options["goal_index"])
-            if not 0 <= index < len(self.goal_set):
-                raise ValueError(f"goal_index {index} out of range 0..{len(self.goal_set) - 1}")
+            self._check_goal_index(index)
         else:
             index = int(self.np_random.integers(len(self.goal_set)))
-        self.goal_index = index
-        self.goal = self.goal_set[index]
-        nodes = self.scene.node_positions()
-        obs, distance = self._observe(nodes)
+        self.scene.step_physics(self.params.reset_steps(self.n_nodes, rebuilt))
+        return self.set_goal(index)
+
+    @property
+    def random_episodes(self) -> bool:
+        """True with domain randomisation: every rebuilt world is drawn anew, so two episodes
+        towards the same goal from a rebuilt world differ (the evaluation then plays each
+        one, and never forks one settled world for several: :mod:`dlo_course.snapshot`)."""
+        return bool(self.randomize)
+
+    def set_goal(self, index: int) -> tuple[np.ndarray, dict[str, Any]]:
+        """Make ``goal_set[index]`` the goal without touching the simulation; returns the
+        observation and info of the rod as it is, towards that goal, as ``reset`` does.
+
+        The last part of every reset. On its own it lets one settled world serve several
+        goals: the evaluation forks the process after one reset and gives each copy its goal
+        (:mod:`dlo_course.snapshot`); the physics never depends on the goal."""
+        self._check_goal_index(int(index))
+        self.goal_index = int(index)
+        self.goal = self.goal_set[self.goal_index]
+        obs, distance = self._observe(self.scene.node_positions())
         self._last_obs, self._last_distance = obs, distance
         return obs, self._info(distance, unstable=False)
+
+    def _check_goal_index(self, index: int) -> None:
+        if not 0 <= index < len(self.goal_set):
+            raise ValueError(f"goal_index {index} out of range 0..{len(self.goal_set) - 1}")
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float64).reshape(-1)

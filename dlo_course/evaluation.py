@@ -29,6 +29,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Sequence
 
+import gymnasium
 import numpy as np
 import torch
 from torch import nn
@@ -38,6 +39,7 @@ from dlo_course import mpi
 from dlo_course.database import resolve_goals
 from dlo_course.ddpg import Actor, load_network, policy_action
 from dlo_course.rundir import ACTOR_FILE
+from dlo_course.snapshot import fork_available, run_in_fork
 
 CHECKPOINT_FILE = ACTOR_FILE  # its old name
 
@@ -295,12 +297,20 @@ class EpisodeTrace:
 
 
 def run_traces(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
-               reinitialize: bool, max_steps: int, progress=None) -> list[EpisodeTrace]:
+               reinitialize: bool, max_steps: int, progress=None,
+               fork: bool | None = None) -> list[EpisodeTrace]:
     """Run the given test episodes in order on one environment (one chain of episodes).
 
     With reinitialisation every episode starts from the same rebuilt world, and the policy
     and the simulation are deterministic, so two episodes with the same goal shape are the
-    same episode: it is simulated once (the paper's test files repeat their goals).
+    same episode: it is simulated once (the paper's test files repeat their goals). And the
+    world is rebuilt and settled only once: each episode runs in a forked copy of the
+    process, from that very state (:mod:`dlo_course.snapshot`), which gives the same
+    episodes as a rebuild before each (tested bit for bit) at a fraction of the cost.
+    Neither holds when the world itself is random (an environment with ``random_episodes``
+    true: domain randomisation): then every episode is played, after its own rebuild. A
+    wrapper that rewrites observations (e.g. noise on P_c) keeps the repeats but not the
+    forks, since a forked episode starts past the wrappers.
 
     Args:
         actor: deterministic policy, a module mapping (1, obs_dim) tensors to (1, 3) actions,
@@ -312,24 +322,68 @@ def run_traces(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
         reinitialize: rebuild the world before each episode, or continue from the last shape.
         max_steps: at most this many actions per episode.
         progress: an optional callable called once after each episode.
+        fork: run the episodes with reinitialisation in forked copies of one settled world
+            (``None``: wherever :func:`~dlo_course.snapshot.fork_available` and the scene has
+            no GUI); ``False`` rebuilds the world before every episode.
     """
+    rod = env.unwrapped
+    # Repeats and forks rest on an episode being a function of its goal alone; a world drawn
+    # at random (domain randomisation) breaks that. A forked episode starts from the rod's
+    # own set_goal, past the wrappers: one that rewrites observations (noise) needs a reset.
+    repeatable = reinitialize and not _random_episodes(env)
+    if fork is None:
+        fork = fork_available() and not getattr(getattr(rod, "scene", None), "gui", True)
+    fork = bool(fork and repeatable and hasattr(rod, "set_goal")
+                and not _rewrites_observations(env))
+    settled = False  # with fork: the world has been rebuilt and settled once
     traces, seen = [], {}
     for i, episode in enumerate(episode_ids):
         goal_index = int(goal_indices[episode])
-        key = env.unwrapped.goal_set[goal_index].tobytes()
-        if reinitialize and key in seen:
+        key = rod.goal_set[goal_index].tobytes()
+        if repeatable and key in seen:
             traces.append(seen[key])
+        elif fork:
+            if not settled:
+                env.reset(options={"reinitialize": True, "goal_index": goal_index})
+                settled = True
+
+            def episode_in_a_copy(goal_index=goal_index):
+                obs, info = rod.set_goal(goal_index)
+                _, distances, _ = _play(actor, env, obs, max_steps)
+                return EpisodeTrace(float(info["distance"]), tuple(distances))
+
+            traces.append(run_in_fork(episode_in_a_copy))
+            seen[key] = traces[-1]
         else:
             # The first episode of a chain starts from the initial configuration.
             obs, info = env.reset(options={"reinitialize": reinitialize or i == 0,
                                            "goal_index": goal_index})
             _, distances, _ = _play(actor, env, obs, max_steps)
             traces.append(EpisodeTrace(float(info["distance"]), tuple(distances)))
-            if reinitialize:
+            if repeatable:
                 seen[key] = traces[-1]
         if progress is not None:
             progress()
     return traces
+
+
+def _layers(env):
+    """``env`` and every environment it wraps, outermost first."""
+    while True:
+        yield env
+        if not isinstance(env, gymnasium.Wrapper):
+            return
+        env = env.env
+
+
+def _random_episodes(env) -> bool:
+    """True if some layer of ``env`` says its episodes are random even from the same goal
+    (``random_episodes``: :attr:`dlo_course.env.DLOShapeEnv.random_episodes`)."""
+    return any(getattr(layer, "random_episodes", False) for layer in _layers(env))
+
+
+def _rewrites_observations(env) -> bool:
+    return any(isinstance(layer, gymnasium.ObservationWrapper) for layer in _layers(env))
 
 
 def run_episodes(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
@@ -361,10 +415,15 @@ def evaluate_thresholds(agent: str | Path | Controller, goals: str | Path | np.n
                         thresholds: Sequence[float], reinitialize: bool = True,
                         episodes: int = 1000, max_steps: int = 30, seed: int = 0,
                         n_nodes: int | None = None, time_mode: str = "code",
-                        show_progress: bool = True) -> dict[float, tuple[Summary | None, list]]:
+                        show_progress: bool = True, env_kwargs: dict | None = None,
+                        env_wrapper=None) -> dict[float, tuple[Summary | None, list]]:
     """:func:`evaluate` at several thresholds, with the same goals.
 
     ``agent`` may also be a :class:`Controller` (a hand-made policy), evaluated the same way.
+
+    ``env_kwargs`` (e.g. ``{"params": SimParams(...)}``) go to every test environment, and
+    ``env_wrapper``, a callable, wraps each one (e.g. observation noise): how
+    :func:`dlo_course.robustness.evaluate_perturbed` tests an agent in a perturbed world.
 
     With reinitialisation the episodes are run once, at the smallest threshold, and scored at
     every threshold (:class:`EpisodeTrace`); without, each threshold has its own chain of
@@ -400,7 +459,10 @@ def evaluate_thresholds(agent: str | Path | Controller, goals: str | Path | np.n
         for run_threshold in runs:
             # No TimeLimit: run_traces stops every episode after max_steps itself.
             env = make_env(max_episode_steps=None, n_nodes=n_nodes, goals=goal_set,
-                           threshold=run_threshold, time_mode=time_mode)
+                           threshold=run_threshold, time_mode=time_mode,
+                           **(env_kwargs or {}))
+            if env_wrapper is not None:
+                env = env_wrapper(env)
             if isinstance(actor, Controller):
                 actor.bind(env)
             try:

@@ -307,7 +307,7 @@ PAPER_TRANSITIONS = 32 * 63 * 300
 def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
               max_steps: int = 30, seed: int = 0, train_preset: str | None = None,
               time_mode: str = "code", whole_database: str = "with",
-              controller: str | None = None) -> Path | None:
+              controller: str | None = None, controller_cells: str = "with") -> Path | None:
     """Regenerate Table I and Figs. 4-5 (see the module docstring); returns the report path
     on rank 0.
 
@@ -320,6 +320,8 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
             :func:`evaluate_controller_cells`) on the paper's test goals, every cell, and
             write its table beside the agents' (``table1_<controller>.csv``, ``.md``) and in
             the report. None (default): the agents only.
+        controller_cells: which cells the controller plays: "with" reinitialisation (the
+            default: with the forked resets, a few minutes per run), or "all".
 
     Every finished evaluation run leaves its results in ``out/runs/``; running the same
     command again reuses them (for the same agents, episodes and seed), so a reproduction
@@ -327,6 +329,8 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
     """
     if whole_database not in WHOLE_DATABASE_CELLS:
         raise ValueError(f"whole_database must be one of {sorted(WHOLE_DATABASE_CELLS)}")
+    if controller_cells not in ("with", "all"):
+        raise ValueError(f"controller_cells must be 'with' or 'all', got {controller_cells!r}")
     if controller is not None:  # a wrong name fails now, not after the agents' hour
         from dlo_course.jacobian import CONTROLLERS
 
@@ -348,9 +352,11 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
     whole_rows = (evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode,
                                  cells=whole_cells, protocol="whole", cache=cache)
                   if whole_cells else [])
-    controller_rows = (evaluate_controller_cells(controller, episodes, max_steps, seed,
-                                                 time_mode, protocol="test", cache=cache)
-                       if controller is not None else [])
+    scope = WHOLE_DATABASE_CELLS[controller_cells]
+    controller_rows = (evaluate_controller_cells(
+        controller, episodes, max_steps, seed, time_mode, protocol="test", cache=cache,
+        cells=[c for c in table1_cells() if scope is None or c.reinit == scope])
+        if controller is not None else [])
     if not mpi.is_root():
         return None
     csv_path, md_path = write_table(rows, paper, out)

@@ -403,3 +403,43 @@ def test_update_rules_replace_the_formulas_without_patching_the_library():
         torch.testing.assert_close(old, new)
     assert ddpg_module.DDPG(3, 1).rules == ddpg_module.UpdateRules()
     assert ddpg_module.UpdateRules().critic_loss is ddpg_module.critic_loss
+
+
+def test_td3_target_is_what_the_update_regresses_on():
+    """ddpg.td3_target (lesson 15) equals DDPG.update's label with TD3's options: the same
+    noise from torch's generator, the smaller of the two target critics, the done mask."""
+    from dlo_course.ddpg import td3_target
+    cfg = DDPGConfig(hidden_sizes=(16, 16), twin_critics=True, target_noise=0.3,
+                     target_noise_clip=0.2, gamma=0.9)
+    torch.manual_seed(3)
+    agent = DDPG(5, 2, action_low=[-2, -1], action_high=[2, 1], config=cfg)
+    with torch.no_grad():  # targets that differ from each other and from the networks
+        for p in agent.critic2_target.parameters():
+            p.add_(0.2 * torch.randn(p.shape))
+    next_obs, rew = torch.randn(32, 5), torch.randn(32, 1)
+    done = (torch.arange(32) % 3 == 0).float().reshape(32, 1)
+    torch.manual_seed(11)
+    expected = bellman_target(rew, agent.target_value(next_obs), done, cfg.gamma)
+    torch.manual_seed(11)
+    noise = cfg.target_noise * torch.randn(32, 2)
+    got = td3_target(rew, next_obs, done, cfg.gamma, agent.actor_target,
+                     [agent.critic_target, agent.critic2_target], noise, cfg.target_noise_clip)
+    assert torch.equal(got, expected) and not got.requires_grad
+    # without noise and with one critic: the paper's target
+    plain = td3_target(rew, next_obs, done, 0.9, agent.actor_target, [agent.critic_target])
+    with torch.no_grad():
+        paper = bellman_target(rew, agent.critic_target(next_obs, agent.actor_target(next_obs)),
+                               done, 0.9)
+    assert torch.equal(plain, paper)
+
+
+def test_actor_update_due_is_the_updates_decision():
+    from dlo_course.ddpg import actor_update_due
+    assert [actor_update_due(k, 1) for k in (1, 2, 3)] == [True, True, True]
+    assert [actor_update_due(k, 3) for k in range(1, 8)] == \
+        [False, False, True, False, False, True, False]
+    torch.manual_seed(0)
+    agent = DDPG(5, 2, config=DDPGConfig(hidden_sizes=(8,), batch_size=8, policy_delay=3))
+    rng = np.random.default_rng(1)
+    steps = [("policy_loss" in agent.update(random_batch(rng))) for _ in range(7)]
+    assert steps == [actor_update_due(k, 3) for k in range(1, 8)]

@@ -14,7 +14,8 @@ from dlo_course.env import DLOShapeEnv
 from dlo_course.simulation import SimParams
 from dlo_course.evaluation import (
     CheckpointError, EpisodeRecord, EpisodeTrace, TrainedAgentError, evaluate,
-    evaluate_thresholds, goal_schedule, load_actor, run_episodes, summarize, wilson_interval,
+    evaluate_thresholds, goal_schedule, load_actor, run_episodes, run_traces, summarize,
+    wilson_interval,
 )
 
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
@@ -146,6 +147,50 @@ def test_repeated_goals_are_simulated_once_with_reinitialization(checkpoint, goa
     assert len(resets) == 1
     assert records[0].done == records[2].done and records[0].final_distance == records[2].final_distance
     assert [r.episode for r in records] == [0, 1, 2]
+
+
+def test_forked_episodes_equal_rebuilt_ones_bit_for_bit(checkpoint, goals_2):
+    """With reinitialisation the world is settled once and each episode runs in a forked
+    copy of it (dlo_course.snapshot): the same traces as rebuilding before every episode,
+    for a trained actor and for a controller with memory; the parent's world is untouched."""
+    from dlo_course.jacobian import JacobianController
+
+    actor, _ = load_actor(checkpoint)
+    schedule = np.array([2, 0, 1])
+    env = DLOShapeEnv(n_nodes=2, goals=goals_2, threshold=0.01)
+    try:
+        controller = JacobianController(n_nodes=2)
+        controller.bind(env)
+        for policy in (actor, controller):
+            forked = run_traces(policy, env, [0, 1, 2], schedule, True, 4, fork=True)
+            before = env.scene.node_positions()
+            rebuilt = run_traces(policy, env, [0, 1, 2], schedule, True, 4, fork=False)
+            assert forked == rebuilt
+            assert len({t.distances for t in forked}) == 3  # three different episodes
+        # after forked episodes the parent still holds the settled world, not an episode's end
+        run_traces(actor, env, [0], schedule, True, 4, fork=True)
+        np.testing.assert_array_equal(env.scene.node_positions(), before)
+    finally:
+        env.close()
+
+
+def test_run_in_fork_isolates_and_reports_failures(monkeypatch):
+    from dlo_course import snapshot
+
+    state = {"n": 1}
+
+    def change_and_return():
+        state["n"] = 99
+        return np.arange(3)
+
+    np.testing.assert_array_equal(snapshot.run_in_fork(change_and_return), [0, 1, 2])
+    assert state["n"] == 1  # the child's change stayed in the child
+    with pytest.raises(RuntimeError, match="ZeroDivisionError"):
+        snapshot.run_in_fork(lambda: 1 / 0)
+    monkeypatch.setenv(snapshot.NO_FORK_VARIABLE, "1")
+    assert not snapshot.fork_available()
+    monkeypatch.setenv(snapshot.NO_FORK_VARIABLE, "0")
+    assert snapshot.fork_available()
 
 
 def test_without_reinitialization_episodes_continue_from_the_last_shape(checkpoint, goals_2):

@@ -198,6 +198,29 @@ MUTANTS: dict[str, list[tuple]] = {
         ("reward of the wrong sign", '"rew": (-distance)', '"rew": (distance)'),
         ("goal taken from obs, not next_obs", "goals = achieved_next[goal_steps]",
          "goals = obs[:, -2 * width:-width].reshape(len(obs), n_nodes, 3)[goal_steps]")],
+    "jacobian_from_probes": [
+        ("J transposed", "    return transposed.T\n", "    return transposed\n"),
+        ("each probe taken as one axis (finite differences of the diagonal only)",
+         "transposed, *_ = np.linalg.lstsq(tip_moves, node_moves, rcond=None)",
+         "transposed = node_moves / np.diag(tip_moves)[:, None]"),
+        ("no check of the probes' span (secondary requirement only)",
+         "    if np.linalg.matrix_rank(tip_moves) < 3:\n        raise ValueError(\"the probing "
+         "moves must span the 3 axes of the tip\")\n", "", 1.5)],
+    "broyden_update": [
+        ("forgets J's prediction", "surprise = dp - jacobian @ du", "surprise = dp"),
+        ("divides by |du|, not |du|^2", "np.outer(surprise, du) / norm2",
+         "np.outer(surprise, du) / np.sqrt(norm2)"),
+        ("ignores min_move", "if norm2 == 0.0 or np.sqrt(norm2) <= min_move:", "if norm2 == 0.0:"),
+        ("updates the input in place", "    return jacobian + gain * np.outer(surprise, du) / norm2",
+         "    jacobian += gain * np.outer(surprise, du) / norm2\n    return jacobian")],
+    "damped_least_squares_step": [
+        ("damping not squared", "damping ** 2 * np.eye", "damping * np.eye"),
+        ("Jacobian transpose, not least squares", "return np.linalg.solve(normal, jacobian.T @ error)",
+         "return jacobian.T @ error"),
+        ("damping ignored", " + damping ** 2 * np.eye(jacobian.shape[1])", ""),
+        ("no check of the damping (secondary requirement only)",
+         "    if damping < 0:\n        raise ValueError(f\"damping must be >= 0, got {damping}\")\n",
+         "", 1.5)],
     "done_interval": [
         ("normal approximation",
          "z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator",
@@ -213,6 +236,56 @@ MUTANTS: dict[str, list[tuple]] = {
     "count_not_worse": [
         ("counts only the cells it cannot tell apart", '!= "below"', '== "within"'),
         ("counts the cells where ours is worse", '!= "below"', '== "below"')],
+    "saturation_report": [
+        ("measured on the scaled action, not on tanh(u)", "squashed = torch.tanh(u).double()",
+         "squashed = actor.squash(u).double()"),
+        ("1 - |tanh| for the tanh's gradient", "(1.0 - squashed ** 2).mean()",
+         "(1.0 - squashed.abs()).mean()"),
+        ("mean of u, not of |u|", "u.double().abs().mean()", "u.double().mean()"),
+        ("per-dimension share over the wrong axis", "beyond.mean(dim=0)", "beyond.mean(dim=1)")],
+    "discounted_returns": [
+        ("bootstrap ignored", "running = float(bootstrap)", "running = 0.0"),
+        ("no discount", "rewards[t] + gamma * running", "rewards[t] + running"),
+        ("discount on the reward, not on the future", "rewards[t] + gamma * running",
+         "gamma * rewards[t] + running")],
+    "smoothed_target_action": [
+        ("noise not clipped", "eps = noise.clamp(-noise_clip, noise_clip)", "eps = noise"),
+        ("action not clipped to the bounds",
+         "return torch.clamp(action + action_scale * eps, low, high)",
+         "return action + action_scale * eps"),
+        ("noise not scaled to the action range", "action + action_scale * eps", "action + eps")],
+    "td3_target": [
+        ("max for min", "torch.min(next_q,", "torch.max(next_q,"),
+        ("only the first critic", "for critic in critic_targets[1:]:",
+         "for critic in critic_targets[1:1]:"),
+        ("no done mask", "gamma * next_q * (1.0 - done)", "gamma * next_q"),
+        ("no target policy smoothing", "        if noise is not None:\n",
+         "        if False:\n")],
+    "actor_update_due": [
+        ("the actor steps at the first update", "critic_updates % policy_delay == 0",
+         "(critic_updates - 1) % policy_delay == 0"),
+        ("inverted decision", "critic_updates % policy_delay == 0",
+         "critic_updates % policy_delay != 0")],
+    "scale_params": [
+        ("factor added, not multiplied", "getattr(params, name) * factor",
+         "getattr(params, name) + factor"),
+        ("a zero factor accepted", "factor > 0)", "factor >= 0)"),
+        ("unknown names not refused", "if name not in PERTURBABLE:", "if name in ():")],
+    "add_observation_noise": [
+        ("noise on the goal P_d", "part = slice(6, 6 + 3 * n_nodes)",
+         "part = slice(6 + 3 * n_nodes, 6 + 6 * n_nodes)"),
+        ("noise on the whole observation", "part = slice(6, 6 + 3 * n_nodes)",
+         "part = slice(None)"),
+        ("std taken as a variance", "rng.normal(0.0, std,", "rng.normal(0.0, std ** 2,"),
+        ("the input modified in place", "noisy = np.array(obs, copy=True)",
+         "noisy = np.asarray(obs)"),
+        ("zero noise still draws", "    if std == 0:\n        return noisy\n", "")],
+    "draw_factors": [
+        ("names in the order given", "for name in sorted(checked)", "for name in checked"),
+        ("bounds swapped", "float(rng.uniform(*checked[name]))",
+         "float(rng.uniform(checked[name][1], checked[name][0]))"),
+        ("zero and negative bounds accepted", "if not (math.isfinite(bound) and bound > 0):",
+         "if not math.isfinite(bound):")],
     "prediction_cells": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "About six cells.")],

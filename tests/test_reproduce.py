@@ -157,3 +157,33 @@ def test_evaluation_runs_are_kept_and_reused(tmp_path, monkeypatch):
     with pytest.raises(AssertionError, match="evaluated again"):  # other weights: a new run
         reproduce.evaluate_cells(agents, episodes=1, max_steps=2, seed=0, cells=cells,
                                  cache=tmp_path / "runs")
+
+
+def test_cli_reproduce_evaluates_a_controller_beside_the_agents(tmp_path, monkeypatch):
+    """`dlo-course reproduce --controller jacobian`: the controller's cells beside the agents',
+    in its own table and in the report. Cheap: two cells (one shared run each for the agents
+    and for the controller), one episode of one action, no Fig. 5 simulation."""
+    import dlo_course.reproduce as reproduce
+
+    cells = [reproduce.Cell("with", 2, "small", 0.05), reproduce.Cell("with", 2, "small", 0.03),
+             reproduce.Cell("without", 2, "small", 0.05)]
+    monkeypatch.setattr(reproduce, "table1_cells", lambda: cells)
+    monkeypatch.setattr(reproduce, "plot_deformation",
+                        lambda agent, out, **kwargs: Path(out).write_bytes(b""))
+    out = tmp_path / "report"
+    result = CliRunner().invoke(main, [
+        "reproduce", "--out", str(out), "--episodes", "1", "--max-steps", "1",
+        "--whole-database", "none", "--controller", "jacobian"])
+    assert result.exit_code == 0, result.output
+    with open(out / "table1_jacobian.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    # by default the controller plays the cells with reinitialisation only (--controller-cells)
+    assert [(r["nodes"], r["threshold"], r["episodes"]) for r in rows] == [
+        ("2", "0.05", "1"), ("2", "0.03", "1")]
+    assert not list((out / "runs").glob("jacobian_test_without_*.json"))
+    assert len(list((out / "runs").glob("test_without_n2_small_*.json"))) == 1  # the agent's
+    assert "the `jacobian` controller" in (out / "report.md").read_text()
+    assert len(list((out / "runs").glob("jacobian_test_with_n2_small_*.json"))) == 1
+    assert len(list((out / "runs").glob("test_with_n2_small_*.json"))) == 1  # the agent's
+    wrong = CliRunner().invoke(main, ["reproduce", "--controller", "nope"])
+    assert wrong.exit_code != 0 and "nope" in wrong.output

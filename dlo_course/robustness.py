@@ -1,0 +1,411 @@
+"""Robustness: a trained agent (or a classical controller) in a world that is not the one it
+was trained in, and domain randomisation to prepare it for that (the paper's future work,
+sim-to-real; lesson 16).
+
+A real rod is never exactly the simulated one: its stiffness, its mass and its damping are
+known only roughly, and a camera sees its nodes with some error. This module makes both
+kinds of mismatch measurable in simulation:
+
+* **model mismatch**: :func:`scale_params` scales physical parameters of the rod
+  (:data:`PERTURBABLE`: Young's modulus, mass, Neo-Hookean damping, edge damping) by factors
+  relative to the training values, e.g. ``{"youngs_modulus": 1.3}`` for a rod 30% stiffer;
+* **sensing noise**: :class:`ObservationNoise` adds seeded Gaussian noise to the observed node
+  positions P_c, and to nothing else;
+* :func:`evaluate_perturbed` runs the paper's test protocol
+  (:func:`dlo_course.evaluation.evaluate_thresholds`) with both; ``dlo-course evaluate
+  --perturb youngs_modulus=1.3 --obs-noise 0.005`` is the same from the command line;
+* **domain randomisation** for training: ``DLOShapeEnv(randomize={"youngs_modulus": [0.7,
+  1.3]})`` draws the factors uniformly in their ranges (:func:`draw_factors`) at every reset
+  that rebuilds the world, from a generator seeded by ``reset(seed=...)``; off by default.
+  From the command line: ``dlo-course train --env-kwargs '{"randomize": {"mass": [0.8,
+  1.2]}}'``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import gymnasium as gym
+import numpy as np
+
+PERTURBABLE = ("youngs_modulus", "mass", "damping", "edge_damping")
+"""The :class:`~dlo_course.simulation.SimParams` fields that can be scaled by a factor."""
+
+
+# ------------------------------------------------------------------ model mismatch
+def validate_factors(factors: Mapping[str, float]) -> dict[str, float]:
+    """Check scaling factors and return them as a plain ``{name: float}`` dict.
+
+    Raises:
+        ValueError: for a name outside :data:`PERTURBABLE`, or a factor that is not a
+            finite positive number (a rod with zero or negative stiffness or mass means
+            nothing).
+    """
+    checked = {}
+    for name, factor in dict(factors).items():
+        if name not in PERTURBABLE:
+            raise ValueError(f"unknown parameter {name!r}: perturb one of "
+                             f"{', '.join(PERTURBABLE)}")
+        try:
+            value = float(factor)
+        except (TypeError, ValueError):
+            raise ValueError(f"the factor of {name} must be a number, got {factor!r}") from None
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"the factor of {name} must be a finite positive number "
+                             f"(1 = the training value), got {factor!r}")
+        checked[name] = value
+    return checked
+
+
+def scale_params(params, factors: Mapping[str, float]):
+    """A copy of ``params`` (:class:`~dlo_course.simulation.SimParams`) with each named field
+    multiplied by its factor, e.g. ``scale_params(SimParams(), {"mass": 0.7})`` for a rod 30%
+    lighter. The factors are checked first (:func:`validate_factors`); no factors: ``params``
+    itself."""
+    factors = validate_factors(factors)
+    if not factors:
+        return params
+    return params.with_(**{name: getattr(params, name) * factor
+                           for name, factor in factors.items()})
+
+
+def parse_perturbation(text: str) -> tuple[str, float]:
+    """``"youngs_modulus=1.3"`` -> ``("youngs_modulus", 1.3)``, checked
+    (:func:`validate_factors`); ValueError for anything else."""
+    name, sep, value = str(text).partition("=")
+    if not sep:
+        raise ValueError(f"{text!r} is not NAME=FACTOR (e.g. youngs_modulus=1.3)")
+    name = name.strip()
+    try:
+        factor = float(value)
+    except ValueError:
+        raise ValueError(f"the factor in {text!r} is not a number") from None
+    return name, validate_factors({name: factor})[name]
+
+
+# ------------------------------------------------------------------ domain randomisation
+def validate_ranges(ranges: Mapping[str, Sequence[float]]) -> dict[str, tuple[float, float]]:
+    """Check domain-randomisation ranges ``{name: (low, high)}`` of factors and return them
+    as ``{name: (float, float)}``.
+
+    Raises:
+        ValueError: for an unknown name, a range that is not two numbers, a bound that is not
+            a finite positive factor, or ``low > high``.
+    """
+    checked = {}
+    for name, bounds in dict(ranges).items():
+        try:
+            low, high = (float(b) for b in bounds)
+        except (TypeError, ValueError):
+            raise ValueError(f"the range of {name} must be two factors [low, high], "
+                             f"got {bounds!r}") from None
+        validate_factors({name: low})
+        validate_factors({name: high})
+        if low > high:
+            raise ValueError(f"the range of {name} is empty: low {low} > high {high}")
+        checked[name] = (low, high)
+    return checked
+
+
+def draw_factors(ranges: Mapping[str, Sequence[float]], rng: np.random.Generator
+                 ) -> dict[str, float]:
+    """One draw of domain-randomisation factors: each factor uniform in its range.
+
+    The names are taken in sorted order and each gets exactly one ``rng.uniform(low, high)``,
+    so the same generator state always gives the same factors, whatever the order in which
+    ``ranges`` was written. The ranges are checked first (:func:`validate_ranges`).
+    """
+    checked = validate_ranges(ranges)
+    return {name: float(rng.uniform(*checked[name])) for name in sorted(checked)}
+
+
+# ------------------------------------------------------------------ sensing noise
+def nodes_slice(n_nodes: int) -> slice:
+    """Where P_c, the current positions of the m selected nodes, sits in an observation:
+    indices 6 .. 6 + 3m (after the tip's position and velocity, before P_d)."""
+    return slice(6, 6 + 3 * int(n_nodes))
+
+
+def add_observation_noise(obs: np.ndarray, n_nodes: int, std: float,
+                          rng: np.random.Generator) -> np.ndarray:
+    """A copy of the observation(s) ``obs`` (..., 6 + 6m) with Gaussian noise of standard
+    deviation ``std`` (m) added to the P_c slice only (:func:`nodes_slice`): the tip's
+    position and velocity and the goal P_d are left exactly as they were.
+
+    The noise is one ``rng.normal(0, std, size)`` draw of the slice's shape; ``std == 0``
+    returns an unchanged copy and draws nothing.
+
+    Raises:
+        ValueError: for a negative or non-finite ``std``, or an observation that does not
+            have 6 + 6m components.
+    """
+    std = float(std)
+    if not (math.isfinite(std) and std >= 0):
+        raise ValueError(f"the noise standard deviation must be >= 0 (m), got {std}")
+    noisy = np.array(obs, copy=True)
+    if noisy.shape[-1] != 6 + 6 * int(n_nodes):
+        raise ValueError(f"an observation of {n_nodes} nodes has {6 + 6 * n_nodes} "
+                         f"components, got {noisy.shape[-1]}")
+    if std == 0:
+        return noisy
+    part = nodes_slice(n_nodes)
+    noise = rng.normal(0.0, std, size=noisy[..., part].shape)
+    noisy[..., part] = noisy[..., part] + noise
+    return noisy
+
+
+class ObservationNoise(gym.ObservationWrapper):
+    """Gaussian noise of standard deviation ``std`` (m) on the observed node positions P_c of
+    a ``DLOShape-v0`` environment, as a camera would add it.
+
+    Only the P_c slice of the observation the *agent* sees is changed
+    (:func:`add_observation_noise`); the tip state and the goal P_d are exact. The reward,
+    ``terminated`` and ``info["distance"]`` are computed by the wrapped environment on the
+    true node positions, so an episode succeeds when the real rod reaches its goal, not when
+    the noisy measurement says so.
+
+    Seeded: the noise generator starts from ``seed`` and is reseeded by ``reset(seed=s)``
+    (from ``s``), so a seeded run always sees the same noise. ``std=0`` is the identity.
+    """
+
+    def __init__(self, env: gym.Env, std: float, seed: int | None = None) -> None:
+        super().__init__(env)
+        std = float(std)
+        if not (math.isfinite(std) and std >= 0):
+            raise ValueError(f"the noise standard deviation must be >= 0 (m), got {std}")
+        self.std = std
+        self.n_nodes = int(env.unwrapped.n_nodes)
+        self.noise_rng = np.random.default_rng(seed)
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        if seed is not None:
+            self.noise_rng = np.random.default_rng(seed)
+        return super().reset(seed=seed, options=options)
+
+    def observation(self, observation):
+        noisy = add_observation_noise(observation, self.n_nodes, self.std, self.noise_rng)
+        space = self.observation_space
+        return np.clip(noisy, space.low, space.high).astype(space.dtype)
+
+
+# ------------------------------------------------------------------ the test protocol
+def evaluate_perturbed(agent, goals, thresholds: Sequence[float],
+                       factors: Mapping[str, float] | None = None, obs_noise: float = 0.0,
+                       noise_seed: int = 0, params=None, **kwargs) -> dict:
+    """The paper's test protocol (:func:`dlo_course.evaluation.evaluate_thresholds`) in a
+    perturbed world: the rod's parameters scaled by ``factors`` relative to ``params`` (the
+    training values, :class:`~dlo_course.simulation.SimParams` by default) and Gaussian noise
+    of ``obs_noise`` m on the observed P_c (:class:`ObservationNoise`, seeded by
+    ``noise_seed`` + the MPI rank).
+
+    ``agent`` is a trained agent or a :class:`~dlo_course.evaluation.Controller`, and
+    ``kwargs`` the other arguments of ``evaluate_thresholds`` (``episodes``, ``seed``,
+    ``reinitialize``...). The success test always uses the true node positions.
+
+    With reinitialisation, repeated test goals are simulated once (as in the unperturbed
+    protocol), so with noise they share one draw of it. With noise the world is rebuilt
+    before every episode, rather than forked from one settled copy (:mod:`dlo_course.snapshot`),
+    so that every episode starts through the wrapper (``run_traces`` sees the
+    observation wrapper and does so): slower, the same episodes otherwise.
+
+    Returns:
+        ``evaluate_thresholds``' ``{threshold: (summary, records)}``.
+    """
+    from dlo_course import mpi
+    from dlo_course.evaluation import evaluate_thresholds
+    from dlo_course.simulation import SimParams
+
+    factors = validate_factors(factors or {})
+    obs_noise = float(obs_noise)
+    if not (math.isfinite(obs_noise) and obs_noise >= 0):
+        raise ValueError(f"the observation noise must be >= 0 (m), got {obs_noise}")
+    scaled = scale_params(params or SimParams(), factors)
+    if obs_noise == 0:
+        return evaluate_thresholds(agent, goals, thresholds, env_kwargs={"params": scaled},
+                                   **kwargs)
+    seed = int(noise_seed) + mpi.rank()
+
+    def wrapper(env):
+        return ObservationNoise(env, obs_noise, seed=seed)
+    return evaluate_thresholds(agent, goals, thresholds, env_kwargs={"params": scaled},
+                               env_wrapper=wrapper, **kwargs)
+
+
+# ------------------------------------------------------------------ the benchmark's files
+NOMINAL = "nominal"
+"""The parameter name of the unperturbed setting (every factor 1, no noise)."""
+NOISE = "obs_noise"
+"""The parameter name of the observation-noise settings (value: the noise's std in m)."""
+RESULT_THRESHOLDS = (0.05, 0.03)
+
+
+def setting_file(out_dir, controller: str, parameter: str, value: float):
+    """Where :func:`run_setting` keeps one setting's JSON: ``CONTROLLER_PARAMETER_VALUE.json``
+    (``CONTROLLER_nominal.json`` for the unperturbed one)."""
+    from pathlib import Path
+
+    name = f"{controller}_{NOMINAL}" if parameter == NOMINAL else \
+        f"{controller}_{parameter}_{value:g}"
+    return Path(out_dir) / f"{name}.json"
+
+
+def run_setting(agent, controller: str, parameter: str, value: float, out_dir,
+                episodes: int = 20, seed: int = 0, goals: str = "small-test",
+                thresholds: Sequence[float] = RESULT_THRESHOLDS, show_progress: bool = True
+                ) -> dict:
+    """Evaluate ``agent`` (a trained agent's folder or a Controller, called ``controller`` in
+    the files) in one perturbed setting and write it as JSON: the paper's protocol with
+    reinitialisation, ``episodes`` episodes on ``goals``, goal draw ``seed`` (the same goals
+    in every setting), noise seed ``seed``.
+
+    ``parameter`` is a name of :data:`PERTURBABLE` (``value``: its factor), :data:`NOISE`
+    (``value``: the std in m) or :data:`NOMINAL`. A setting whose file exists with the same
+    number of episodes is read back instead (the benchmark resumes).
+
+    Returns:
+        The setting's record: ``controller``, ``parameter``, ``value``, ``episodes``,
+        ``seed``, ``goals``, ``wall_seconds``, ``summaries`` ({threshold as text: Table I's
+        statistics}) and ``records`` ({threshold as text: every episode}).
+    """
+    import json
+    import time
+    from dataclasses import asdict
+
+    path = setting_file(out_dir, controller, parameter, value)
+    if path.is_file():
+        kept = json.loads(path.read_text())
+        if kept.get("episodes") == episodes and kept.get("seed") == seed:
+            return kept
+    if parameter == NOMINAL:
+        factors, noise = {}, 0.0
+    elif parameter == NOISE:
+        factors, noise = {}, float(value)
+    else:
+        factors, noise = validate_factors({parameter: value}), 0.0
+    start = time.perf_counter()
+    results = evaluate_perturbed(agent, goals, thresholds, factors=factors, obs_noise=noise,
+                                 noise_seed=seed, episodes=episodes, seed=seed,
+                                 reinitialize=True, show_progress=show_progress)
+    wall = time.perf_counter() - start
+    if any(summary is None for summary, _ in results.values()):
+        return {}  # not MPI rank 0
+    record = {
+        "controller": controller, "parameter": parameter, "value": float(value),
+        "episodes": episodes, "seed": seed, "goals": goals, "reinitialize": True,
+        "wall_seconds": round(wall, 1),
+        "summaries": {f"{t:g}": s.as_dict() for t, (s, _) in results.items()},
+        "records": {f"{t:g}": [asdict(r) for r in recs] for t, (_, recs) in results.items()},
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(record, indent=1))
+    return record
+
+
+def load_results(out_dir) -> list[dict]:
+    """Every setting's record (:func:`run_setting`) kept in ``out_dir``, sorted by
+    controller, then the training world first, each parameter of :data:`PERTURBABLE` by
+    value, then the noise levels; an empty list if there are none."""
+    import json
+    from pathlib import Path
+
+    records = []
+    for path in sorted(Path(out_dir).glob("*.json")):
+        data = json.loads(path.read_text())
+        if {"controller", "parameter", "value", "summaries"} <= set(data):
+            records.append(data)
+    order = (NOMINAL, *PERTURBABLE, NOISE)
+
+    def key(r):
+        rank = order.index(r["parameter"]) if r["parameter"] in order else len(order)
+        return r["controller"], rank, r["parameter"], r["value"]
+    return sorted(records, key=key)
+
+
+def curves(results: Sequence[dict], threshold: float = 0.05) -> dict:
+    """The robustness curves in ``results``: ``{(controller, parameter): rows}`` for every
+    perturbed parameter (:data:`PERTURBABLE` or :data:`NOISE`), rows sorted by value, each
+    ``(value, done %, Wilson 95% low, high, episodes)`` at ``threshold``. The nominal setting
+    joins every curve of its controller, as factor 1 or noise 0."""
+    from dlo_course.evaluation import wilson_interval
+
+    key = f"{threshold:g}"
+    points: dict = {}
+    nominal = {}
+    for r in results:
+        summary = r["summaries"][key]
+        n = summary["episodes"]
+        done = round(summary["done_percent"] * n / 100)
+        low, high = wilson_interval(done, n)
+        row = (r["value"], 100.0 * done / n, 100.0 * low, 100.0 * high, n)
+        if r["parameter"] == NOMINAL:
+            nominal[r["controller"]] = row
+        else:
+            points.setdefault((r["controller"], r["parameter"]), []).append(row)
+    for (controller, parameter), rows in points.items():
+        if controller in nominal:
+            base = nominal[controller]
+            rows.append((0.0 if parameter == NOISE else 1.0, *base[1:]))
+    return {k: sorted(set(rows)) for k, rows in sorted(points.items())}
+
+
+def results_table(results: Sequence[dict], thresholds: Sequence[float] = RESULT_THRESHOLDS
+                  ) -> str:
+    """A Markdown table of ``results``: one row per setting, done % with its Wilson 95%
+    interval and the mean final distance at each threshold."""
+    head = "| controller | change | episodes | " + " | ".join(
+        f"done % at {t:g} m (95% CI) | mean final distance at {t:g} m" for t in thresholds)
+    lines = [head + " |", "|---|---|---|" + "---|---|" * len(thresholds)]
+    for r in results:
+        if r["parameter"] == NOMINAL:
+            change = "none (training world)"
+        elif r["parameter"] == NOISE:
+            change = f"noise on P_c, std {1000 * r['value']:g} mm"
+        else:
+            change = f"{r['parameter']} x {r['value']:g}"
+        cells = []
+        for t in thresholds:
+            s = r["summaries"][f"{t:g}"]
+            cells.append(f"{s['done_percent']:.0f} ({s['done_ci_low']:.0f}-"
+                         f"{s['done_ci_high']:.0f}) | {s['mean_distance']:.4f} m")
+        lines.append(f"| {r['controller']} | {change} | {r['episodes']} | "
+                     + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def plot_results(results: Sequence[dict], out=None, threshold: float = 0.05):
+    """Done % at ``threshold`` against each change (one panel per perturbed parameter, one
+    line per controller), with Wilson 95% intervals; saved to ``out`` when given.
+
+    Returns:
+        The matplotlib figure.
+    """
+    import matplotlib.pyplot as plt
+
+    data = curves(results, threshold)
+    parameters = [p for p in (*PERTURBABLE, NOISE) if any(k[1] == p for k in data)]
+    fig, axes = plt.subplots(1, max(1, len(parameters)),
+                             figsize=(4.2 * max(1, len(parameters)), 3.8), squeeze=False)
+    for ax, parameter in zip(axes[0], parameters):
+        for (controller, param), rows in data.items():
+            if param != parameter:
+                continue
+            x = np.array([r[0] for r in rows]) * (1000 if parameter == NOISE else 1)
+            y = np.array([r[1] for r in rows])
+            err = np.clip([[r[1] - r[2] for r in rows], [r[3] - r[1] for r in rows]],
+                          0, None)  # the interval's ends may miss 0 or 100 by 1e-14
+            ax.errorbar(x, y, yerr=err, marker="o", capsize=3, label=controller)
+        ax.set_xlabel("noise std on P_c (mm)" if parameter == NOISE
+                      else f"{parameter} factor (1 = training)")
+        ax.set_ylim(-3, 103)
+        ax.grid(alpha=0.3)
+    axes[0][0].set_ylabel(f"done % at {threshold:g} m (Wilson 95%)")
+    if parameters:
+        axes[0][0].legend()
+    fig.tight_layout()
+    if out is not None:
+        from pathlib import Path
+
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=120)
+    return fig
