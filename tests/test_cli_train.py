@@ -18,6 +18,7 @@ EVERY_FIELD = {
     "env_id": "Pendulum-v1", "env_kwargs": {"g": 9.5}, "episodes": 3, "steps_per_episode": 7,
     "seed": 5, "out_dir": "OUT", "checkpoint_every": 2, "reduce": "mean", "warmup": 6,
     "expected_agents": 1, "updates_per_step": 2, "her_k": 0, "reset_between_episodes": False,
+    "stop_at_goal": True,
     "validate_every": 4, "validation_goals": 3, "validation_steps": 9, "torch_threads": 2,
     "actor_lr": 2e-4, "critic_lr": 3e-3, "batch_size": 8, "buffer_size": 999, "gamma": 0.9,
     "tau": 0.05, "hidden_sizes": [8, 16], "final_init": 0.01, "noise_theta": 0.2,
