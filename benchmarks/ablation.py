@@ -70,11 +70,11 @@ def variants() -> dict[str, tuple[str, TrainConfig]]:
         "recipe-paper-batch": ("the paper's batch (128), buffer (1e6) and 1 update per step",
                                _recipe(batch_size=128, buffer_size=1_000_000,
                                        updates_per_step=1)),
-        "recipe-run-on": ("episodes run all their steps past the goal, as in the paper "
-                          "(stop_at_goal False)", _recipe(stop_at_goal=False)),
-        "recipe-run-on-t03": ("run on past the goal, and train at 0.03 m instead of 0.05 m",
-                              _recipe(stop_at_goal=False,
-                                      env_kwargs={"n_nodes": NODES, "threshold": 0.03})),
+        "recipe-stop-at-goal": ("episodes end at the goal (stop_at_goal, the first "
+                                "recipe) instead of running on as in the paper",
+                                _recipe(stop_at_goal=True)),
+        "recipe-train-at-0.05": ("trained at the paper's 0.05 m instead of 0.03 m",
+                                 _recipe(env_kwargs={"n_nodes": NODES})),
     }
 
 

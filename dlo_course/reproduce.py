@@ -295,6 +295,10 @@ def course_options(record: dict) -> str:
         parts.append(f"policy delay {record['policy_delay']}")
     if record.get("target_noise"):
         parts.append(f"target noise {record['target_noise']:g}")
+    if record.get("stop_at_goal"):
+        parts.append("episodes end at the goal")
+    if record.get("train_threshold") is not None:
+        parts.append(f"trained at {record['train_threshold']:g} m")
     return ", ".join(parts) or "none"
 
 
@@ -413,7 +417,9 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
     lines += ["", "Course options (not in the paper, docs/design.md): input scaling, pre-tanh "
               "penalty, updates per environment step, OU sigma when it differs from 0.3, and "
               "the training levers (hindsight relabelling, no reset between episodes, batch "
-              "and buffer sizes, TD3's twin critics, policy delay and target noise)."]
+              "and buffer sizes, TD3's twin critics, policy delay and target noise, episodes "
+              "that end at the goal instead of running all their steps, a training threshold "
+              "other than 0.05 m)."]
     for title, path, note in tables:
         lines += ["", title, "", note, "", path.read_text()]
     lines += [f"Files: `{csv_path.name}`, `{md_path.name}`"

@@ -401,7 +401,9 @@ def run_record(folder: str | Path) -> dict:
                       reset_between_episodes=cfg.reset_between_episodes,
                       batch_size=cfg.ddpg.batch_size, buffer_size=cfg.ddpg.buffer_size,
                       twin_critics=cfg.ddpg.twin_critics, policy_delay=cfg.ddpg.policy_delay,
-                      target_noise=cfg.ddpg.target_noise)
+                      target_noise=cfg.ddpg.target_noise, stop_at_goal=cfg.stop_at_goal)
+        if "threshold" in cfg.env_kwargs:  # trained at another threshold than the env's 0.05
+            record["train_threshold"] = cfg.env_kwargs["threshold"]
     try:
         progress = read_progress(folder)
     except (FileNotFoundError, ValueError):  # no run yet, or not one episode

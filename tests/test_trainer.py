@@ -298,11 +298,12 @@ def test_levers_are_off_by_default_and_in_the_paper_preset():
 
 def test_recipe_preset():
     recipe = preset("recipe")
-    assert recipe.env_id == "DLOShape-v0" and recipe.env_kwargs == {"n_nodes": 4}
+    assert recipe.env_id == "DLOShape-v0" and recipe.env_kwargs == {"n_nodes": 4,
+                                                                    "threshold": 0.03}
     assert (recipe.episodes, recipe.steps_per_episode, recipe.checkpoint_every,
             recipe.expected_agents, recipe.updates_per_step, recipe.her_k,
             recipe.reset_between_episodes, recipe.reduce, recipe.stop_at_goal) == \
-        (500, 60, 10, 2, 2, 4, False, "sum", True)
+        (500, 60, 10, 2, 2, 4, False, "sum", False)
     assert (recipe.validate_every, recipe.validation_goals, recipe.validation_steps) == (20, 30, 30)
     assert PRESETS["paper"].validate_every == 0  # the paper kept its last actor
     d = recipe.ddpg
