@@ -116,7 +116,8 @@ def test_a_toml_file_overrides_the_preset_and_the_flags_override_the_file(tmp_pa
     c = got["config"]
     assert got["preset"] == "recipe"
     assert (c["episodes"], c["seed"], c["validate_every"]) == (12, 4, 0)  # the file
-    assert c["env_kwargs"] == {"n_nodes": 4, "goals": "large"}  # merged into the preset's
+    assert c["env_kwargs"] == {"n_nodes": 4, "threshold": 0.03,
+                            "goals": "large"}  # merged into the preset's
     assert c["ddpg"]["batch_size"] == 64 and c["ddpg"]["tau"] == 1.0
     assert c["ddpg"]["hidden_sizes"] == [32, 32]
     assert c["her_k"] == 4 and c["ddpg"]["twin_critics"]  # the preset, not in the file
