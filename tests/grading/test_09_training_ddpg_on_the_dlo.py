@@ -54,8 +54,9 @@ def library_episode(make_env, max_steps, seed):
     policy = policy_for(env, seed)
     agent = SimpleNamespace(act=lambda obs, noise: policy(obs))
     noise = SimpleNamespace(reset=lambda: None)
+    # The exercise's episode ends at the goal: the library's with stop_at_goal=True.
     config = TrainConfig(env_id="unused", env_kwargs={}, steps_per_episode=max_steps,
-                         warmup=10**9)
+                         warmup=10**9, stop_at_goal=True)
     result = run_episode(env, agent, buffer, noise, config, seed, None)
     return result, buffer
 
