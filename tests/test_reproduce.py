@@ -76,9 +76,10 @@ def test_reproduce_flag_errors():
 @pytest.mark.mpi
 def test_cluster_script_runs_the_whole_pipeline_with_the_smoke_preset(tmp_path):
     """The SLURM script, outside SLURM, with the plain `mpiexec -hosts` launcher: smoke
-    training of the three agents on 2 ranks, then the 24 settings split over the ranks."""
+    training of the three agents on 2 ranks, then the 24 settings split over the ranks
+    (episodes of at most 5 actions: the pipeline, not the agents, is under test)."""
     out = tmp_path / "paper"
-    env = dict(os.environ, VENV=str(BIN.parent), PRESET="smoke", NTASKS="2", EPISODES="2",
+    env = dict(os.environ, VENV=str(BIN.parent), PRESET="smoke", NTASKS="2", EPISODES="2", MAX_STEPS="5",
                OUT=str(out), LAUNCH=f"{BIN / 'mpiexec'} -hosts localhost,localhost",
                PATH=f"{BIN}:{os.environ['PATH']}")
     subprocess.run(["bash", str(REPO / "scripts" / "cluster" / "paper.sbatch")], env=env,
