@@ -13,7 +13,11 @@ several hours of work on two cores).
 
 `run` trains and evaluates the variants not yet done, in the order of VARIANTS, then writes
 the report; `report` writes `benchmarks/results/ablation/` (README.md with the table,
-ablation.csv, curves.png) from whatever is finished. Runs go to `runs/ablation/NAME`.
+ablation.csv, curves.png) from whatever is finished. Runs go to `runs/ablation/NAME`; a
+finished variant's record (its evaluation, progress, configuration, last checkpoint's counts
+and final actor, not its replay buffer) is kept in `benchmarks/results/ablation/runs/NAME`,
+which `report` reads when `runs/` does not have it: a report made on another machine, or
+after `runs/` was cleaned, still has every finished variant.
 
 No variant selects its actor on validation goals (`validate_every=0`): the comparison is of
 what each set of levers has learnt after the budget, not of the selection.
@@ -26,6 +30,7 @@ import csv
 import dataclasses
 import json
 import math
+import shutil
 import sys
 from pathlib import Path
 
@@ -98,6 +103,28 @@ def train_to_budget(name: str, config: TrainConfig, budget: int) -> Path:
     return run
 
 
+KEPT_FILES = ("evaluation.json", "progress.csv", "config.json", "actor.pt",
+              "checkpoints/latest.json")
+"""What a finished variant leaves in the repository (its replay buffer stays in runs/)."""
+
+
+def keep_run(name: str, run: Path) -> Path:
+    """Copy the record of a finished variant into RESULTS/runs/NAME."""
+    kept = RESULTS / "runs" / name
+    for relative in KEPT_FILES:
+        (kept / relative).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(run / relative, kept / relative)
+    return kept
+
+
+def finished_run(name: str) -> Path | None:
+    """Where the finished variant ``name`` is: its run, else its kept record, else None."""
+    for run in (RUNS / name, RESULTS / "runs" / name):
+        if (run / "evaluation.json").is_file():
+            return run
+    return None
+
+
 def evaluate_run(name: str, run: Path, episodes: int) -> dict:
     """Table I's protocol on the run's actor, both goal sets; cached in ``evaluation.json``."""
     cache = run / "evaluation.json"
@@ -124,6 +151,11 @@ def run(budget: int, episodes: int, only: list[str]) -> None:
     for name, (_, config) in chosen.items():
         if only and name not in only:
             continue
+        done = finished_run(name)
+        if done is not None and transitions_done(done) >= budget:
+            if mpi.is_root():
+                print(f"{name}: already done ({done})", flush=True)
+            continue
         if mpi.is_root():
             print(f"{name}: training to {budget} transitions", flush=True)
         run_dir = train_to_budget(name, config, budget)
@@ -131,6 +163,7 @@ def run(budget: int, episodes: int, only: list[str]) -> None:
             print(f"{name}: evaluating", flush=True)
         evaluate_run(name, run_dir, episodes)
         if mpi.is_root():
+            keep_run(name, run_dir)
             report()
 
 
@@ -146,8 +179,8 @@ def report() -> Path:
     RESULTS.mkdir(parents=True, exist_ok=True)
     rows, curves = [], {}
     for name, (what, config) in variants().items():
-        run_dir = RUNS / name
-        if not (run_dir / "evaluation.json").is_file():
+        run_dir = finished_run(name)
+        if run_dir is None:
             continue
         result = json.loads((run_dir / "evaluation.json").read_text())
         progress = read_progress(run_dir)
