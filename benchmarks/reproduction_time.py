@@ -19,20 +19,15 @@ env`), so a protocol's minutes can only shrink by simulating fewer steps or chea
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 from pathlib import Path
 
 from dlo_course.database import resolve_goals
 from dlo_course.evaluation import goal_schedule
+from dlo_course.reproduce import _policy
 from dlo_course.simulation import SimParams
 
 RANKS = 2  # the runs kept in the repository were made on 2 ranks
-
-
-def reset_steps(n_nodes: int) -> int:
-    """Physics steps of one reset that keeps the rod's shape."""
-    return SimParams().reset_steps(n_nodes, rebuilt=False)
 
 
 def simulated_episodes(database: str, protocol: str, n_nodes: int, episodes: int,
@@ -52,8 +47,8 @@ def main() -> None:
     parser.add_argument("--agents", type=Path, default=Path("data/checkpoints"))
     args = parser.parse_args()
 
-    digests = {n: hashlib.sha256((args.agents / f"nodes{n}" / "actor.pt").read_bytes())
-               .hexdigest()[:12] for n in (2, 4, 6)}
+    # the digest that names an agent's kept runs, as reproduce computes it
+    digests = {n: _policy(args.agents, None, n)[1] for n in (2, 4, 6)}
     totals: dict[str, list[float]] = {}
     print(f"{'run':<48} {'min':>6} {'episodes':>8} {'simulated':>9} {'actions':>7} "
           f"{'resets':>6} {'steps/s':>7}")
@@ -73,7 +68,7 @@ def main() -> None:
         mean_steps = run["summaries"][strictest]["mean_steps"]
         simulated = simulated_episodes(database, protocol, nodes, episodes, seed, reinit)
         actions = simulated * mean_steps
-        resets = 0 if reinit else episodes * reset_steps(nodes)
+        resets = 0 if reinit else episodes * SimParams().reset_steps(nodes, rebuilt=False)
         steps = actions + resets
         seconds = run["minutes"] * 60
         print(f"{path.stem[:48]:<48} {run['minutes']:6.1f} {episodes:8d} {simulated:9d} "

@@ -79,8 +79,9 @@ def test_cluster_script_runs_the_whole_pipeline_with_the_smoke_preset(tmp_path):
     training of the three agents on 2 ranks, then the 24 settings split over the ranks
     (episodes of at most 5 actions: the pipeline, not the agents, is under test)."""
     out = tmp_path / "paper"
-    env = dict(os.environ, VENV=str(BIN.parent), PRESET="smoke", NTASKS="2", EPISODES="2", MAX_STEPS="5",
-               OUT=str(out), LAUNCH=f"{BIN / 'mpiexec'} -hosts localhost,localhost",
+    env = dict(os.environ, VENV=str(BIN.parent), PRESET="smoke", NTASKS="2", EPISODES="2",
+               MAX_STEPS="5", OUT=str(out),
+               LAUNCH=f"{BIN / 'mpiexec'} -hosts localhost,localhost",
                PATH=f"{BIN}:{os.environ['PATH']}")
     subprocess.run(["bash", str(REPO / "scripts" / "cluster" / "paper.sbatch")], env=env,
                    check=True, timeout=900, cwd=tmp_path, capture_output=True)
