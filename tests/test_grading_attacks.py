@@ -19,6 +19,9 @@ from dlo_course import course
 
 REPO = Path(__file__).resolve().parents[1]
 SOLUTIONS = REPO / "solutions"
+# Under pytest-xdist (--dist loadgroup) the module-scoped grading of the attacked
+# submission (about a minute) runs once, on one worker, instead of once per worker.
+pytestmark = pytest.mark.xdist_group("grading_attacks")
 
 # exercise -> (what the attack tries, the exercise cell's new body after its first line).
 # {canary} is replaced by a path outside the scratch folder that must never be written.
