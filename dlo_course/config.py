@@ -282,7 +282,7 @@ _PRESETS = {
     # (docs/design.md, "Training levers"): hindsight relabelling, TD3's three fixes,
     # episodes that keep the rod's shape and run on past the goal (the authors' code),
     # training at 0.03 m instead of 0.05 m, bigger batches and buffer, validation every 20
-    # episodes. The shipped 4-node agent: 120 episodes on one core (7 200 transitions); the
+    # episodes. The shipped 4-node agent: 260 episodes on 2 ranks (31 200 transitions); the
     # 2- and 6-node ones were trained before the last two levers (stop_at_goal=True, 0.05 m).
     "recipe": Preset("4 nodes, 2 cores, every training lever on; trained the shipped "
                      "4-node agent",
