@@ -282,10 +282,11 @@ _PRESETS = {
     # (docs/design.md, "Training levers"): hindsight relabelling, TD3's three fixes,
     # episodes that keep the rod's shape and run on past the goal (the authors' code),
     # training at 0.03 m instead of 0.05 m, bigger batches and buffer, validation every 20
-    # episodes. The shipped 4-node agent: 260 episodes on 2 ranks (31 200 transitions); the
-    # 2- and 6-node ones were trained before the last two levers (stop_at_goal=True, 0.05 m).
+    # episodes. The shipped 2- and 4-node agents: 500 and 260 episodes on 2 ranks (60 000 and
+    # 31 200 transitions, --nodes 2 for the first); the 6-node one was trained before the last
+    # two levers (stop_at_goal=True, 0.05 m).
     "recipe": Preset("4 nodes, 2 cores, every training lever on; trained the shipped "
-                     "4-node agent",
+                     "2- and 4-node agents",
                      TrainConfig(env_kwargs={"n_nodes": 4, "threshold": 0.03}, episodes=500,
                                  steps_per_episode=60,
                                  checkpoint_every=10, out_dir="runs/recipe",

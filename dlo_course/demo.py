@@ -26,7 +26,7 @@ DEFAULT_GOAL_INDEX = 15
 """The goal an agent's demo shows unless told otherwise: small-test goal 15. The shipped
 4-node agent brings the rod from 0.19 m to 0.047 m of it in 7 actions, below the demo's
 0.05 m (``benchmarks/results/recipe/nodes4_small_test_reinit.json``); the shipped 2- and 6-node
-agents reach it too, to 0.037 and 0.040 m (``nodes2_small_test_reinit.json``,
+agents reach it too, both to 0.040 m (``nodes2_small_test_reinit.json``,
 ``nodes6_small_test_reinit.json``)."""
 
 HOLD_SECONDS = 1.5
