@@ -15,7 +15,7 @@ from gymnasium import spaces
 
 from dlo_course.database import resolve_goals
 from dlo_course.mesh import selected_nodes
-from dlo_course.robustness import draw_factors, scale_params, validate_ranges
+from dlo_course.randomisation import draw_factors, scale_params, validate_ranges
 from dlo_course.simulation import RodScene, SimParams
 
 ENV_ID = "DLOShape-v0"
@@ -114,10 +114,10 @@ class DLOShapeEnv(gym.Env):
       the authors' values by default.
     * ``randomize``: domain randomisation, off by default (None or ``{}``). A dict ``{name:
       [low, high]}`` of factor ranges for fields of ``params`` (Young's modulus, mass,
-      damping, edge damping: :data:`dlo_course.robustness.PERTURBABLE`), e.g.
+      damping, edge damping: :data:`dlo_course.randomisation.PERTURBABLE`), e.g.
       ``{"youngs_modulus": [0.7, 1.3]}``: every reset that rebuilds the world draws each
       factor uniformly in its range and builds the rod with ``params`` scaled by them
-      (:func:`dlo_course.robustness.draw_factors`; the draw is in ``sim_factors``). The
+      (:func:`dlo_course.randomisation.draw_factors`; the draw is in ``sim_factors``). The
       draws come from their own generator, seeded by ``reset(seed=...)``, so a seeded run is
       deterministic and gets the goals it would get without randomisation. A reset with
       ``reinitialize=False`` keeps the rod, and so its factors.

@@ -6,16 +6,18 @@ A real rod is never exactly the simulated one: its stiffness, its mass and its d
 known only roughly, and a camera sees its nodes with some error. This module makes both
 kinds of mismatch measurable in simulation:
 
-* **model mismatch**: :func:`scale_params` scales physical parameters of the rod
-  (:data:`PERTURBABLE`: Young's modulus, mass, Neo-Hookean damping, edge damping) by factors
-  relative to the training values, e.g. ``{"youngs_modulus": 1.3}`` for a rod 30% stiffer;
+* **model mismatch**: :func:`dlo_course.randomisation.scale_params` scales physical
+  parameters of the rod (:data:`dlo_course.randomisation.PERTURBABLE`: Young's modulus, mass,
+  Neo-Hookean damping, edge damping) by factors relative to the training values, e.g.
+  ``{"youngs_modulus": 1.3}`` for a rod 30% stiffer;
 * **sensing noise**: :class:`ObservationNoise` adds seeded Gaussian noise to the observed node
   positions P_c, and to nothing else;
 * :func:`evaluate_perturbed` runs the paper's test protocol
   (:func:`dlo_course.evaluation.evaluate_thresholds`) with both; ``dlo-course evaluate
   --perturb youngs_modulus=1.3 --obs-noise 0.005`` is the same from the command line;
 * **domain randomisation** for training: ``DLOShapeEnv(randomize={"youngs_modulus": [0.7,
-  1.3]})`` draws the factors uniformly in their ranges (:func:`draw_factors`) at every reset
+  1.3]})`` draws the factors uniformly in their ranges
+  (:func:`dlo_course.randomisation.draw_factors`) at every reset
   that rebuilds the world, from a generator seeded by ``reset(seed=...)``; off by default.
   From the command line: ``dlo-course train --env-kwargs '{"randomize": {"mass": [0.8,
   1.2]}}'``.
@@ -29,47 +31,10 @@ from typing import Any, Mapping, Sequence
 import gymnasium as gym
 import numpy as np
 
-PERTURBABLE = ("youngs_modulus", "mass", "damping", "edge_damping")
-"""The :class:`~dlo_course.simulation.SimParams` fields that can be scaled by a factor."""
+from dlo_course.randomisation import PERTURBABLE, scale_params, validate_factors
 
 
 # ------------------------------------------------------------------ model mismatch
-def validate_factors(factors: Mapping[str, float]) -> dict[str, float]:
-    """Check scaling factors and return them as a plain ``{name: float}`` dict.
-
-    Raises:
-        ValueError: for a name outside :data:`PERTURBABLE`, or a factor that is not a
-            finite positive number (a rod with zero or negative stiffness or mass means
-            nothing).
-    """
-    checked = {}
-    for name, factor in dict(factors).items():
-        if name not in PERTURBABLE:
-            raise ValueError(f"unknown parameter {name!r}: perturb one of "
-                             f"{', '.join(PERTURBABLE)}")
-        try:
-            value = float(factor)
-        except (TypeError, ValueError):
-            raise ValueError(f"the factor of {name} must be a number, got {factor!r}") from None
-        if not (math.isfinite(value) and value > 0):
-            raise ValueError(f"the factor of {name} must be a finite positive number "
-                             f"(1 = the training value), got {factor!r}")
-        checked[name] = value
-    return checked
-
-
-def scale_params(params, factors: Mapping[str, float]):
-    """A copy of ``params`` (:class:`~dlo_course.simulation.SimParams`) with each named field
-    multiplied by its factor, e.g. ``scale_params(SimParams(), {"mass": 0.7})`` for a rod 30%
-    lighter. The factors are checked first (:func:`validate_factors`); no factors: ``params``
-    itself."""
-    factors = validate_factors(factors)
-    if not factors:
-        return params
-    return params.with_(**{name: getattr(params, name) * factor
-                           for name, factor in factors.items()})
-
-
 def parse_perturbation(text: str) -> tuple[str, float]:
     """``"youngs_modulus=1.3"`` -> ``("youngs_modulus", 1.3)``, checked
     (:func:`validate_factors`); ValueError for anything else."""
@@ -82,42 +47,6 @@ def parse_perturbation(text: str) -> tuple[str, float]:
     except ValueError:
         raise ValueError(f"the factor in {text!r} is not a number") from None
     return name, validate_factors({name: factor})[name]
-
-
-# ------------------------------------------------------------------ domain randomisation
-def validate_ranges(ranges: Mapping[str, Sequence[float]]) -> dict[str, tuple[float, float]]:
-    """Check domain-randomisation ranges ``{name: (low, high)}`` of factors and return them
-    as ``{name: (float, float)}``.
-
-    Raises:
-        ValueError: for an unknown name, a range that is not two numbers, a bound that is not
-            a finite positive factor, or ``low > high``.
-    """
-    checked = {}
-    for name, bounds in dict(ranges).items():
-        try:
-            low, high = (float(b) for b in bounds)
-        except (TypeError, ValueError):
-            raise ValueError(f"the range of {name} must be two factors [low, high], "
-                             f"got {bounds!r}") from None
-        validate_factors({name: low})
-        validate_factors({name: high})
-        if low > high:
-            raise ValueError(f"the range of {name} is empty: low {low} > high {high}")
-        checked[name] = (low, high)
-    return checked
-
-
-def draw_factors(ranges: Mapping[str, Sequence[float]], rng: np.random.Generator
-                 ) -> dict[str, float]:
-    """One draw of domain-randomisation factors: each factor uniform in its range.
-
-    The names are taken in sorted order and each gets exactly one ``rng.uniform(low, high)``,
-    so the same generator state always gives the same factors, whatever the order in which
-    ``ranges`` was written. The ranges are checked first (:func:`validate_ranges`).
-    """
-    checked = validate_ranges(ranges)
-    return {name: float(rng.uniform(*checked[name])) for name in sorted(checked)}
 
 
 # ------------------------------------------------------------------ sensing noise

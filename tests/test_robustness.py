@@ -1,4 +1,4 @@
-"""dlo_course.robustness: a perturbed world really is perturbed in PyBullet, nonsense values
+"""dlo_course.robustness and dlo_course.randomisation: a perturbed world really is perturbed in PyBullet, nonsense values
 are refused, the observation noise touches only P_c (seeded, zero noise the identity), domain
 randomisation is seeded and reaches the scene, and `dlo-course evaluate` takes both."""
 
@@ -13,8 +13,8 @@ from click.testing import CliRunner
 
 from dlo_course import robustness
 from dlo_course.cli import main
-from dlo_course.robustness import (ObservationNoise, add_observation_noise, draw_factors,
-                                   scale_params, validate_factors, validate_ranges)
+from dlo_course.randomisation import draw_factors, scale_params, validate_factors, validate_ranges
+from dlo_course.robustness import ObservationNoise, add_observation_noise
 from dlo_course.simulation import RodScene, SimParams
 
 SETTLE_STEPS = 10  # 30 ms: the rod, released straight, compresses under its own weight

@@ -1,5 +1,5 @@
-"""Grading: lesson 16, robustness and the road to the real robot (reference:
-dlo_course.robustness).
+"""Grading: lesson 16, robustness and the road to the real robot (references:
+dlo_course.randomisation and dlo_course.robustness).
 
 The three exercises are pure functions: each is run on fixed inputs built here (SimParams and
 factors, observations and seeded generators, factor ranges) and its results are compared with
@@ -12,7 +12,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from dlo_course import robustness
+from dlo_course import randomisation, robustness
 from dlo_course.simulation import SimParams
 
 pytestmark = pytest.mark.notebook("16_robustness")
@@ -51,7 +51,7 @@ def probe_scale_params(fn, bases, cases, bad):
     return out
 
 
-@pytest.mark.exercise("scale_params", points=2, reference="dlo_course.robustness.scale_params")
+@pytest.mark.exercise("scale_params", points=2, reference="dlo_course.randomisation.scale_params")
 def test_scale_params(student):
     got = student.run(probe_scale_params, SCALE_BASES, SCALE_CASES, SCALE_BAD)
     results = iter(got["results"])
@@ -59,7 +59,7 @@ def test_scale_params(student):
         for factors in SCALE_CASES:
             mine = next(results)
             assert isinstance(mine, dict), f"scale_params(..., {factors}) raised {mine}"
-            want = dataclasses.asdict(robustness.scale_params(SimParams(**base), factors))
+            want = dataclasses.asdict(randomisation.scale_params(SimParams(**base), factors))
             assert mine.keys() == want.keys()
             for key, value in want.items():
                 if isinstance(value, float):
@@ -153,12 +153,12 @@ def probe_draw_factors(fn, cases, bad):
     return out
 
 
-@pytest.mark.exercise("draw_factors", points=2, reference="dlo_course.robustness.draw_factors")
+@pytest.mark.exercise("draw_factors", points=2, reference="dlo_course.randomisation.draw_factors")
 def test_draw_factors(student):
     got = student.run(probe_draw_factors, DRAW_CASES, DRAW_BAD)
     for k, (ranges, seed) in enumerate(DRAW_CASES):
         rng = np.random.default_rng(seed)
-        want = robustness.draw_factors(ranges, rng)
+        want = randomisation.draw_factors(ranges, rng)
         mine = got["results"][k]
         assert sorted(mine) == sorted(want), f"{ranges}: names {sorted(mine)}"
         for name, value in want.items():
