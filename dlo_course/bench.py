@@ -11,12 +11,14 @@ import time
 import numpy as np
 
 from dlo_course.env import make_env
+from dlo_course.task import DEFAULT_N_NODES
 
 
 def time_env(time_mode: str, steps: int, seed: int = 0) -> dict:
     """Run ``steps`` random actions; return actions/s and the share of each part of a step."""
-    goals = np.full((1, 4, 3), 0.5)  # far away: the episode never terminates
-    env = make_env(max_episode_steps=None, n_nodes=4, goals=goals, time_mode=time_mode)
+    goals = np.full((1, DEFAULT_N_NODES, 3), 0.5)  # far away: the episode never terminates
+    env = make_env(max_episode_steps=None, n_nodes=DEFAULT_N_NODES, goals=goals,
+                   time_mode=time_mode)
     try:
         env.reset(seed=seed)
         env.action_space.seed(seed)

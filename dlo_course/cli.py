@@ -22,11 +22,25 @@ from dlo_course.config import (PRESET_SUMMARIES, PRESETS, DDPGConfig, TrainConfi
                                config_fields, experiment_config, field_docs, field_types,
                                paper_default, preset_table, read_toml)
 from dlo_course.database import BOXES, GOAL_SOURCES, DatabaseError
-from dlo_course.mesh import SELECTED_RINGS
 from dlo_course.paths import DATA_DIR
+from dlo_course.task import DEFAULT_N_NODES, NODE_COUNTS, TRAIN_THRESHOLD
 
 PRESET_NAMES = click.Choice(list(PRESETS))
-NODE_COUNTS = click.Choice([str(n) for n in SELECTED_RINGS])
+
+
+class NodeCount(click.Choice):
+    """``--nodes`` of every command: one of :data:`dlo_course.task.NODE_COUNTS`, as an int
+    (typed "4" or given 4)."""
+
+    def __init__(self) -> None:
+        super().__init__([str(n) for n in NODE_COUNTS])
+
+    def convert(self, value: Any, param: click.Parameter | None,
+                ctx: click.Context | None) -> int:
+        return int(super().convert(str(value), param, ctx))
+
+
+NODES = NodeCount()
 TIME_MODES = click.Choice(["code", "paper"])  # SimParams.time_mode; simulation imports PyBullet
 
 
@@ -104,8 +118,8 @@ def plot_boxes(out: Path) -> None:
 # The names of CONTROLLER_NAMES below (defined with the evaluate command).
 @click.option("--controller", type=click.Choice(["jacobian"]), default=None,
               help="Watch a classical controller instead (dlo_course.jacobian).")
-@click.option("--nodes", "n_nodes", type=NODE_COUNTS, default=None,
-              help="Number of selected mesh nodes [4; an agent's: inferred].")
+@click.option("--nodes", "n_nodes", type=NODES, default=None,
+              help=f"Number of selected mesh nodes [the agent's; else {DEFAULT_N_NODES}].")
 @click.option("--goals", "--database", "goals", type=click.Choice(GOAL_SOURCES),
               default=None, help="Goal set: a whole database, or the paper's test goals "
               "drawn from it [small; with --agent or --controller: small-test].")
@@ -127,7 +141,7 @@ def plot_boxes(out: Path) -> None:
               default=Path("reports/demo.png"), show_default=True,
               help="PNG of the first and last frames; a GIF of every episode is written "
                    "beside it, and an MP4 if ffmpeg is installed.")
-def demo(agent: Path | None, controller: str | None, n_nodes: str | None, goals: str | None,
+def demo(agent: Path | None, controller: str | None, n_nodes: int | None, goals: str | None,
          goal_indices: tuple[int, ...], episodes: int | None, steps: int, seed: int,
          width: int | None, height: int | None, out: Path) -> None:
     """Render episodes headless (random actions, a trained agent or a controller) and save
@@ -139,7 +153,7 @@ def demo(agent: Path | None, controller: str | None, n_nodes: str | None, goals:
     if goal_indices and episodes:
         raise click.UsageError("give --goal-index or --episodes (not both)")
     try:
-        summary = run_demo(n_nodes=None if n_nodes is None else int(n_nodes), goals=goals,
+        summary = run_demo(n_nodes=n_nodes, goals=goals,
                            steps=steps, seed=seed, out=out, agent=agent,
                            controller=controller, goal_indices=goal_indices,
                            episodes=episodes, width=width, height=height)
@@ -372,10 +386,10 @@ def train_config(preset_name: str | None, config_file: Path | None, nodes: int |
                    "preset). It overrides the preset; the flags override it.")
 @click.option("--list-presets", is_flag=True, expose_value=False, is_eager=True,
               callback=_list_presets, help="Print the presets with their summaries and exit.")
-@click.option("--nodes", type=click.IntRange(min=1), default=None,
-              help=f"Rod nodes to control ({', '.join(map(str, SELECTED_RINGS))}): "
-                   "env_kwargs' n_nodes [preset; the paper: "
-                   f"{paper_default(TrainConfig, 'env_kwargs')['n_nodes']}].")
+@click.option("--nodes", type=NODES, default=None,
+              help="Rod nodes to control: env_kwargs' n_nodes [the preset's: " + ", ".join(
+                  f"{name} {config.env_kwargs['n_nodes']}" for name, config in PRESETS.items()
+                  if "n_nodes" in config.env_kwargs) + "].")
 @_config_options
 @click.option("--resume", is_flag=True, help="Continue the run in --out from its resume state.")
 @click.option("--overwrite", is_flag=True, help="Start afresh even if --out holds a run.")
@@ -450,7 +464,7 @@ def ship(run_dir: Path, dest: Path, actor: str) -> None:
 def plot(run_dirs: tuple[Path, ...], out: Path, labels: tuple[str, ...], x_axis: str,
          aggregate_seeds: bool) -> None:
     """Learning curves of training runs, like the paper's Fig. 4."""
-    from dlo_course.learning_curves import plot_learning_curves
+    from dlo_course.plots import plot_learning_curves
 
     try:
         plot_learning_curves(run_dirs, out=out, labels=labels or None, x=x_axis,
@@ -472,13 +486,13 @@ CONTROLLER_NAMES = click.Choice(["jacobian"])
 @click.option("--controller", "controller_name", type=CONTROLLER_NAMES, default=None,
               help="Instead of --agent, a classical controller: 'jacobian', shape servoing "
                    "with an online deformation Jacobian (dlo_course.jacobian), for --nodes "
-                   "[4] nodes.")
+                   f"[{DEFAULT_N_NODES}] nodes.")
 @click.option("--database", "goals", default="small", show_default=True,
               help="Goals: 'small-test' or 'large-test' (the goals of the paper's Table I), "
                    "'small' or 'large' (the whole database), a database .npz, or a .npy "
                    "array (K, nodes, 3).")
 @click.option("--threshold", "thresholds", type=click.FloatRange(min=0, min_open=True),
-              multiple=True, help="Success distance (m) [0.05]. Repeat it to score the same "
+              multiple=True, help=f"Success distance (m) [{TRAIN_THRESHOLD}]. Repeat it to score the same "
               "goals at several thresholds: with reinitialisation the episodes are then run "
               "once, at the smallest.")
 @click.option("--no-reinit", is_flag=True,
@@ -487,9 +501,9 @@ CONTROLLER_NAMES = click.Choice(["jacobian"])
 @click.option("--max-steps", type=click.IntRange(min=1), default=30, show_default=True)
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed of the goal draw.")
-@click.option("--nodes", "n_nodes", type=NODE_COUNTS, default=None,
-              help="Nodes the agent must have been trained for (default: inferred), or the "
-                   "controller's (default 4).")
+@click.option("--nodes", "n_nodes", type=NODES, default=None,
+              help="Nodes the agent must have been trained for, or the controller's "
+                   f"[the agent's; else {DEFAULT_N_NODES}].")
 @click.option("--time-mode", type=TIME_MODES, default="code", show_default=True)
 @click.option("--perturb", "perturbations", multiple=True, metavar="NAME=FACTOR",
               help="Test in a perturbed world: scale a parameter of the rod relative to "
@@ -502,7 +516,7 @@ CONTROLLER_NAMES = click.Choice(["jacobian"])
               help="Write the summary and every episode as JSON.")
 def evaluate(agent: Path | None, controller_name: str | None, goals: str,
              thresholds: tuple[float, ...], no_reinit: bool, episodes: int, max_steps: int,
-             seed: int, n_nodes: str | None, time_mode: str, perturbations: tuple[str, ...],
+             seed: int, n_nodes: int | None, time_mode: str, perturbations: tuple[str, ...],
              obs_noise: float, out: Path | None) -> None:
     """The paper's test protocol (Table I) for one trained agent or a classical controller;
     parallel under mpiexec."""
@@ -524,15 +538,15 @@ def evaluate(agent: Path | None, controller_name: str | None, goals: str,
     if controller_name is not None:
         from dlo_course.jacobian import CONTROLLERS
 
-        n_nodes = n_nodes or "4"
-        agent = CONTROLLERS[controller_name](int(n_nodes))
-    thresholds = thresholds or (0.05,)
+        n_nodes = n_nodes or DEFAULT_N_NODES
+        agent = CONTROLLERS[controller_name](n_nodes)
+    thresholds = thresholds or (TRAIN_THRESHOLD,)
     try:
         results = evaluate_perturbed(agent, goals, thresholds, factors=factors,
                                      obs_noise=obs_noise, noise_seed=seed,
                                      reinitialize=not no_reinit, episodes=episodes,
                                      max_steps=max_steps, seed=seed,
-                                     n_nodes=None if n_nodes is None else int(n_nodes),
+                                     n_nodes=n_nodes,
                                      time_mode=time_mode)
     except (TrainedAgentError, FileNotFoundError, ValueError) as err:
         raise click.ClickException(str(err)) from None

@@ -5,7 +5,6 @@ that defines a run (environment, budget, seed, course options); :data:`PRESETS` 
 starting points of ``dlo-course train --preset``. The command line builds its options, their
 choices and the defaults in their help from these dataclasses, and imports this module when it
 starts: that is why nothing here may import torch or PyBullet (``tests/test_config.py``).
-:mod:`dlo_course.ddpg` and :mod:`dlo_course.trainer` re-export the names, their old homes.
 """
 
 from __future__ import annotations
@@ -23,6 +22,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
+
+from dlo_course.task import DEFAULT_N_NODES, NODE_COUNTS
 
 REDUCE_OPS = ("sum", "mean")
 """How the agents' gradients can be combined (``TrainConfig.reduce``); the paper sums."""
@@ -140,11 +141,12 @@ class DDPGConfig:
 
 @dataclass
 class TrainConfig:
-    """Everything that defines a training run. Defaults follow the paper, for 2 rod nodes."""
+    """Everything that defines a training run. Defaults follow the paper, for the library's
+    default node count (:data:`dlo_course.task.DEFAULT_N_NODES`); the presets name theirs."""
 
     env_id: str = "DLOShape-v0"
     """Gymnasium id of the environment; any continuous-control (Box) environment works."""
-    env_kwargs: dict[str, Any] = field(default_factory=lambda: {"n_nodes": 2})
+    env_kwargs: dict[str, Any] = field(default_factory=lambda: {"n_nodes": DEFAULT_N_NODES})
     """Keyword arguments of ``gymnasium.make`` (for the rod: ``n_nodes`` = 2, 4 or 6)."""
     episodes: int = bounded(63, 1)
     """Episodes per agent (the paper: 63, i.e. 32 x 63 = 2016 episodes in all)."""
@@ -253,18 +255,26 @@ class Preset:
     config: TrainConfig
 
 
+def _first_agent() -> dict[str, Any]:
+    """The env_kwargs of the presets that train the paper's first agent: the fewest nodes."""
+    return {"n_nodes": NODE_COUNTS[0]}
+
+
 _PRESETS = {
     # Seconds of learning code on top of ~40 simulator steps per agent: for CI and notebooks.
     # The batch is small so that updates do happen within 2 x 20 steps.
     "smoke": Preset("seconds, for CI and notebooks",
-                    TrainConfig(episodes=2, steps_per_episode=20, checkpoint_every=1,
+                    TrainConfig(env_kwargs=_first_agent(), episodes=2, steps_per_episode=20,
+                                checkpoint_every=1,
                                 out_dir="runs/smoke", ddpg=DDPGConfig(batch_size=16))),
     # At ~5 simulator actions per second per core: 60 x 150 actions per agent.
     "laptop": Preset("about an hour on a 4-core laptop",
-                     TrainConfig(episodes=60, steps_per_episode=150, checkpoint_every=5,
+                     TrainConfig(env_kwargs=_first_agent(), episodes=60, steps_per_episode=150,
+                                 checkpoint_every=5,
                                  out_dir="runs/laptop", expected_agents=4)),
     "paper": Preset("the paper: 32 agents x 63 episodes x 300 steps, gradients summed",
-                    TrainConfig(episodes=63, steps_per_episode=300, checkpoint_every=7,
+                    TrainConfig(env_kwargs=_first_agent(), episodes=63, steps_per_episode=300,
+                                checkpoint_every=7,
                                 out_dir="runs/paper", expected_agents=32, reduce="sum")),
     # The paper's DDPG with four course options that make a small budget go further
     # (docs/design.md, "Training on two cores"): fixed input scaling, a penalty on the
@@ -273,7 +283,8 @@ _PRESETS = {
     # transitions/s on 2 cores: up to half an hour of simulation plus the updates.
     "course": Preset("under an hour on 2 cores, with the course options that trained the "
                      "first round's agents",
-                     TrainConfig(episodes=240, steps_per_episode=60, checkpoint_every=10,
+                     TrainConfig(env_kwargs=_first_agent(), episodes=240, steps_per_episode=60,
+                                 checkpoint_every=10,
                                  out_dir="runs/course", expected_agents=2, updates_per_step=2,
                                  stop_at_goal=True,
                                  ddpg=DDPGConfig(normalize_obs=True, preactivation_l2=0.01,

@@ -45,7 +45,6 @@ import numpy as np
 import torch
 from torch import nn
 
-# Its old home: the lessons import DDPGConfig from here.
 from dlo_course.config import DDPGConfig
 
 

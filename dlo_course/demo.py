@@ -16,8 +16,8 @@ from typing import Callable, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from dlo_course.plots import (caption_frame, plot_episode_frames, save_gif,  # noqa: F401
-                              save_mp4)  # (save_gif: its old home was here)
+from dlo_course.plots import caption_frame, plot_episode_frames, save_gif, save_mp4
+from dlo_course.task import DEFAULT_N_NODES, reached
 
 DEFAULT_AGENT_GOALS = "small-test"
 """Where an agent's or a controller's demo takes its goals: the paper's test goals."""
@@ -54,17 +54,18 @@ class Episode:
 
     @property
     def success(self) -> bool:
-        return self.distances[-1] < self.threshold
+        return bool(reached(self.distances[-1], self.threshold))
 
     def captioned_frames(self) -> list[np.ndarray]:
         """The frames with what acted, the goal, the action count and the mean node distance
         written on each (:func:`dlo_course.plots.caption_frame`)."""
         captioned = []
         for step, (frame, distance) in enumerate(zip(self.frames, self.distances)):
-            reached = f"  (below {self.threshold:g} m: done)" if distance < self.threshold else ""
+            done = f"  (below {self.threshold:g} m: done)" if reached(distance, self.threshold) \
+                else ""
             captioned.append(caption_frame(frame, (
                 f"{self.who}, goal {self.goal_index} of {self.goals}",
-                f"action {step}: mean node distance {distance:.3f} m{reached}")))
+                f"action {step}: mean node distance {distance:.3f} m{done}")))
         return captioned
 
 
@@ -127,7 +128,7 @@ def _policy(agent, controller: str | None, n_nodes: int | None):
     if controller is not None:
         from dlo_course.jacobian import CONTROLLERS
 
-        policy = CONTROLLERS[controller](n_nodes or 4)
+        policy = CONTROLLERS[controller](n_nodes or DEFAULT_N_NODES)
 
         def start(env, obs):
             policy.bind(env)
@@ -181,7 +182,7 @@ def run_demo(n_nodes: int | None = None, goals: str | None = None, steps: int = 
         goals = goals or DEFAULT_AGENT_GOALS
     else:
         who, start, act = "random actions" if policy is None else "policy", None, policy
-        n_nodes, goals = n_nodes or 4, goals or "small"
+        n_nodes, goals = n_nodes or DEFAULT_N_NODES, goals or "small"
 
     # No TimeLimit: the loop stops each episode after `steps` itself.
     env = make_env(max_episode_steps=None, n_nodes=n_nodes, goals=goals,
@@ -250,4 +251,4 @@ def save_demo(episodes: Sequence[Episode], out: str | Path, n_nodes: int, fps: i
 
 
 __all__ = ["DEFAULT_AGENT_GOALS", "DEFAULT_GOAL_INDEX", "Episode", "play_rendered",
-           "render_frame", "run_demo", "save_demo", "save_gif"]
+           "render_frame", "run_demo", "save_demo"]

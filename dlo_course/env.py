@@ -17,6 +17,7 @@ from dlo_course.database import resolve_goals
 from dlo_course.mesh import selected_nodes
 from dlo_course.randomisation import draw_factors, scale_params, validate_ranges
 from dlo_course.simulation import RodScene, SimParams
+from dlo_course.task import DEFAULT_N_NODES, TRAIN_THRESHOLD, ObservationLayout, reached
 
 ENV_ID = "DLOShape-v0"
 MAX_EPISODE_STEPS = 300
@@ -61,7 +62,7 @@ class DLOShapeEnv(gym.Env):
     ## Observation Space
 
     ``Box(float32)`` of size 6 + 6m (18, 30 or 42), the paper's eq. (4), clipped to generous
-    finite bounds:
+    finite bounds (:func:`dlo_course.task.split_observation` cuts it into its parts):
 
     =========  ===========================  ======  ==========
     index      what                         unit    bound
@@ -98,13 +99,16 @@ class DLOShapeEnv(gym.Env):
 
     ## Arguments
 
-    * ``n_nodes``: number of selected nodes, 2, 4 or 6 (the paper's three trainings).
+    * ``n_nodes``: number of selected nodes, 2, 4 or 6 (the paper's three trainings,
+      :data:`dlo_course.task.NODE_COUNTS`); by default
+      :data:`dlo_course.task.DEFAULT_N_NODES` (4).
     * ``goals``: where the desired shapes come from
       (:func:`dlo_course.database.resolve_goals`): "small" or "large" (every record of the
       paper's deformation databases), "small-test" or "large-test" (the goals the paper's
       Table I was measured on), a database or goal file path, or an array (K, n_nodes, 3) of
       desired node positions in metres, world frame.
-    * ``threshold``: success distance (m); the paper trains at 0.05 and tests at 0.05 and 0.03.
+    * ``threshold``: success distance (m); the paper trains at 0.05 and tests at 0.05 and 0.03
+      (:data:`dlo_course.task.TRAIN_THRESHOLD`, :data:`dlo_course.task.TABLE_THRESHOLDS`).
     * ``render_mode``: None, "rgb_array" (an image of robot and rod, P_c blue and P_d red
       crosses) or "human" (PyBullet's GUI; needs a display).
     * ``time_mode``: physics time per action, "code" (3 ms, the authors' code; the default) or
@@ -147,9 +151,9 @@ class DLOShapeEnv(gym.Env):
 
     def __init__(
         self,
-        n_nodes: int = 4,
+        n_nodes: int = DEFAULT_N_NODES,
         goals: str | np.ndarray = "small",
-        threshold: float = 0.05,
+        threshold: float = TRAIN_THRESHOLD,
         render_mode: str | None = None,
         time_mode: str | None = None,
         params: SimParams | None = None,
@@ -177,8 +181,9 @@ class DLOShapeEnv(gym.Env):
 
         # Generous finite bounds: positions within 10 m of the origin, tip speed below
         # 100 m/s. Observations are clipped to them, so they always lie in the space.
-        bound = np.full(6 + 6 * n_nodes, 10.0, dtype=np.float32)
-        bound[3:6] = 100.0
+        layout = ObservationLayout(n_nodes)
+        bound = np.full(layout.size, 10.0, dtype=np.float32)
+        bound[layout.tip_velocity] = 100.0
         self.observation_space = spaces.Box(-bound, bound, dtype=np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
 
@@ -268,7 +273,7 @@ class DLOShapeEnv(gym.Env):
 
         obs, distance = self._observe(nodes)
         self._last_obs, self._last_distance = obs, distance
-        terminated = bool(distance < self.threshold)
+        terminated = bool(reached(distance, self.threshold))
         return obs, -distance, terminated, False, self._info(distance, False)
 
     def render(self):
@@ -315,7 +320,7 @@ class DLOShapeEnv(gym.Env):
     def _info(self, distance: float, unstable: bool) -> dict[str, Any]:
         return {
             "distance": float(distance),
-            "is_success": bool(distance < self.threshold) and not unstable,
+            "is_success": bool(reached(distance, self.threshold)) and not unstable,
             "tip_position": self.scene.tip_position(),
             "goal_index": self.goal_index,
             "simulation_unstable": unstable,

@@ -40,8 +40,8 @@ from dlo_course.database import resolve_goals
 from dlo_course.ddpg import Actor, load_network, policy_action
 from dlo_course.rundir import ACTOR_FILE
 from dlo_course.snapshot import fork_available, run_in_fork
-
-CHECKPOINT_FILE = ACTOR_FILE  # its old name
+from dlo_course.task import (NODE_COUNTS, TRAIN_THRESHOLD, nodes_of_observation_size,
+                             observation_size, reached, split_observation)
 
 
 # ------------------------------------------------------------------------------ statistics
@@ -118,9 +118,6 @@ class TrainedAgentError(ValueError):
     """A trained agent is missing, unreadable, or does not fit the task it is evaluated on."""
 
 
-CheckpointError = TrainedAgentError  # its old name
-
-
 def load_actor(agent: str | Path, n_nodes: int | None = None):
     """Load the actor of a trained agent: a run directory, a shipped agent's folder (both
     hold ``actor.pt``) or an actor file.
@@ -151,14 +148,15 @@ def load_actor(agent: str | Path, n_nodes: int | None = None):
         raise TrainedAgentError(f"{path} holds a {type(actor).__name__}, not an Actor")
     obs_dim = actor.init_kwargs["obs_dim"]
     act_dim = actor.init_kwargs["act_dim"]
-    trained_nodes = (obs_dim - 6) // 6
-    if act_dim != 3 or obs_dim != 6 + 6 * trained_nodes or trained_nodes not in (2, 4, 6):
+    trained_nodes = nodes_of_observation_size(obs_dim)
+    if act_dim != 3 or trained_nodes is None:
+        sizes = "/".join(str(observation_size(n)) for n in NODE_COUNTS)
         raise TrainedAgentError(f"{path} was not trained on DLOShape-v0 (observation "
-                                f"{obs_dim}, action {act_dim}; the rod needs 18/30/42 and 3)")
+                                f"{obs_dim}, action {act_dim}; the rod needs {sizes} and 3)")
     if n_nodes is not None and n_nodes != trained_nodes:
         raise TrainedAgentError(f"{path} was trained for {trained_nodes} nodes (observation "
                                 f"{obs_dim}) but is evaluated for {n_nodes} nodes "
-                                f"(observation {6 + 6 * n_nodes}); pass --nodes "
+                                f"(observation {observation_size(n_nodes)}); pass --nodes "
                                 f"{trained_nodes} or another agent")
     actor.eval()
     return actor, trained_nodes
@@ -226,9 +224,9 @@ def recorded_tip_controller(database, n_nodes: int):
 
     class RecordedTipController(nn.Module):
         def forward(self, obs: torch.Tensor) -> torch.Tensor:
-            desired = obs[:, 6 + 3 * n_nodes:]
-            index = torch.cdist(desired, goals).argmin(dim=1)
-            return torch.clamp((tips[index] - obs[:, :3]) / step, -1.0, 1.0)
+            parts = split_observation(obs, n_nodes)
+            index = torch.cdist(parts.desired.flatten(1), goals).argmin(dim=1)
+            return torch.clamp((tips[index] - parts.tip) / step, -1.0, 1.0)
 
     return RecordedTipController()
 
@@ -288,7 +286,7 @@ class EpisodeTrace:
     def record(self, episode: int, goal_index: int, threshold: float) -> EpisodeRecord:
         """The episode's outcome at ``threshold`` (not below the one it was run with)."""
         for steps, distance in enumerate(self.distances, start=1):
-            if distance < threshold:
+            if reached(distance, threshold):
                 return EpisodeRecord(episode, goal_index, True, distance, steps,
                                      self.start_distance)
         final = self.distances[-1] if self.distances else self.start_distance
@@ -396,7 +394,7 @@ def run_episodes(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarra
 
 
 def evaluate(agent: str | Path, goals: str | Path | np.ndarray = "small",
-             threshold: float = 0.05, reinitialize: bool = True, episodes: int = 1000,
+             threshold: float = TRAIN_THRESHOLD, reinitialize: bool = True, episodes: int = 1000,
              max_steps: int = 30, seed: int = 0, n_nodes: int | None = None,
              time_mode: str = "code", show_progress: bool = True) -> tuple[Summary | None, list]:
     """Table I's protocol for one trained agent (:func:`load_actor`) and setting; runs on

@@ -38,26 +38,22 @@ from typing import Any
 import gymnasium
 import numpy as np
 
+from dlo_course.task import ObservationLayout, reached, split_observation
+
 
 def split_goal_obs(obs: np.ndarray, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
-    """The achieved and desired node positions inside observations.
+    """The achieved and desired node positions inside observations: in the words of
+    goal-conditioned learning, P_c and P_d of :func:`dlo_course.task.split_observation`.
 
     Args:
-        obs: (..., obs_dim) observations ending with ``[P_c (3m) | P_d (3m)]``.
+        obs: (..., 6 + 6m) observations of ``DLOShape-v0``.
         n_nodes: m.
 
     Returns:
         ``(achieved, desired)``, views of ``obs`` of shape (..., m, 3) each: P_c and P_d.
     """
-    obs = np.asarray(obs)
-    width = 3 * n_nodes
-    if obs.shape[-1] < 2 * width:
-        raise ValueError(f"observations of length {obs.shape[-1]} cannot end with "
-                         f"[P_c | P_d] for {n_nodes} nodes (needs at least {2 * width})")
-    lead = obs.shape[:-1]
-    achieved = obs[..., -2 * width:-width].reshape(*lead, n_nodes, 3)
-    desired = obs[..., -width:].reshape(*lead, n_nodes, 3)
-    return achieved, desired
+    parts = split_observation(np.asarray(obs), n_nodes)
+    return parts.current, parts.desired
 
 
 def goal_distance(achieved: np.ndarray, desired: np.ndarray) -> np.ndarray:
@@ -131,7 +127,7 @@ def relabel(obs: np.ndarray, act: np.ndarray, next_obs: np.ndarray, steps: np.nd
 
     def with_goal(o: np.ndarray) -> np.ndarray:  # (N, obs_dim) copies with P_d := goal
         o = o.astype(np.float32)  # fancy indexing already copied; never write into the episode
-        o[:, -3 * n_nodes:] = goals.reshape(len(goals), -1)
+        o[:, ObservationLayout(n_nodes).desired] = goals.reshape(len(goals), -1)
         return o
 
     return {
@@ -139,7 +135,7 @@ def relabel(obs: np.ndarray, act: np.ndarray, next_obs: np.ndarray, steps: np.nd
         "act": act[steps].astype(np.float32),
         "rew": (-distance).astype(np.float32),
         "next_obs": with_goal(next_obs[steps]),
-        "done": (distance < threshold).astype(np.float32),
+        "done": reached(distance, threshold).astype(np.float32),
     }
 
 

@@ -35,6 +35,7 @@ from __future__ import annotations
 import numpy as np
 
 from dlo_course.evaluation import Controller
+from dlo_course.task import split_observation
 
 
 # ------------------------------------------------------------------ the three pieces
@@ -208,12 +209,8 @@ class JacobianController(Controller):
     def split(self, obs) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(tip (3,), P_c (3m,), P_d (3m,)) of an observation, float64 (DLOShapeEnv's
         layout: tip, tip velocity, P_c, P_d)."""
-        obs = np.asarray(obs, dtype=np.float64).reshape(-1)
-        width = 3 * self.n_nodes
-        if obs.shape != (6 + 2 * width,):
-            raise ValueError(f"expected an observation of {6 + 2 * width} values for "
-                             f"{self.n_nodes} nodes, got {obs.shape}")
-        return obs[:3], obs[6:6 + width], obs[6 + width:]
+        parts = split_observation(np.asarray(obs, dtype=np.float64).reshape(-1), self.n_nodes)
+        return parts.tip, parts.current.reshape(-1), parts.desired.reshape(-1)
 
     def act(self, obs) -> np.ndarray:
         """The next action, (3,) float32 in [-1, 1], for one observation (6 + 6m,)."""

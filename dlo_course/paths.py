@@ -15,4 +15,3 @@ MESH_PATH = DATA_DIR / "rod.vtk"
 DATABASE_DIR = DATA_DIR / "databases"
 AGENTS_DIR = DATA_DIR / "checkpoints"
 """The shipped trained agents, one folder per node count (:func:`dlo_course.rundir.agent_dir`)."""
-CHECKPOINT_DIR = AGENTS_DIR  # the old name, used by the lessons

@@ -32,14 +32,11 @@ from dlo_course.database import BOXES, load_database
 from dlo_course.evaluation import evaluate_thresholds, load_actor
 from dlo_course.paths import AGENTS_DIR, DATA_DIR
 from dlo_course.plots import plot_deformation, plot_learning_curves
-# ship_run and training_record: their old home, where tests and notebooks import them.
-from dlo_course.rundir import agent_dir, ship_run, training_record, write_json  # noqa: F401
+from dlo_course.rundir import agent_dir, training_record, write_json
+from dlo_course.task import NODE_COUNTS, TABLE_THRESHOLDS
 from dlo_course.trainer import train
 
-checkpoint_dir = agent_dir  # the old name of agent_dir
-
 PAPER_TABLE = DATA_DIR / "paper" / "table1.csv"
-NODES = (2, 4, 6)
 
 
 @dataclass(frozen=True)
@@ -58,8 +55,8 @@ class Cell:
 
 def table1_cells() -> list[Cell]:
     """The 24 settings in the paper's order."""
-    return [Cell(r, n, db, thr) for r in ("with", "without") for n in NODES
-            for db in ("small", "large") for thr in (0.05, 0.03)]
+    return [Cell(r, n, db, thr) for r in ("with", "without") for n in NODE_COUNTS
+            for db in ("small", "large") for thr in TABLE_THRESHOLDS]
 
 
 def read_paper_table(path: Path = PAPER_TABLE) -> dict[tuple, dict[str, float]]:
@@ -79,7 +76,7 @@ def train_agents(preset_name: str, out: Path, seed: int = 0) -> Path:
     """Train one agent per node count with a trainer preset; returns the folder of their run
     directories (``out/checkpoints/nodes{2,4,6}``), which are trained agents."""
     root = Path(out) / "checkpoints"
-    for n in NODES:
+    for n in NODE_COUNTS:
         config = preset(preset_name, env_kwargs={"n_nodes": n}, seed=seed,
                         out_dir=str(agent_dir(root, n)))
         train(config, resume=True, progress=mpi.is_root())
@@ -346,7 +343,7 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
     if train_preset is not None:
         checkpoints = train_agents(train_preset, out, seed)
     checkpoints = Path(checkpoints or AGENTS_DIR)
-    for n in NODES:  # a missing or wrong agent fails now, not after an hour of evaluation
+    for n in NODE_COUNTS:  # a missing or wrong agent fails now, not after an hour of evaluation
         load_actor(agent_dir(checkpoints, n), n)
     cache = out / "runs"
     rows = evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode, protocol="test",
@@ -378,13 +375,13 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
                        f"Goals: {GOAL_PROTOCOLS['test']}; the same episodes as the agents'. "
                        f"A hand-made controller (`dlo_course/jacobian.py`), default "
                        f"settings. {_time_note(controller_rows)}."))
-    plot_learning_curves([agent_dir(checkpoints, n) for n in NODES],
+    plot_learning_curves([agent_dir(checkpoints, n) for n in NODE_COUNTS],
                          out=out / "fig4_learning_curves.png",
-                         labels=[f"{n} nodes" for n in NODES])
+                         labels=[f"{n} nodes" for n in NODE_COUNTS])
     fig5 = out / "fig5_deformation.png"
     plot_deformation(agent_dir(checkpoints, 4), fig5, seed=seed, max_steps=max_steps,
                      time_mode=time_mode)
-    records = {n: training_record(checkpoints, n) for n in NODES}
+    records = {n: training_record(checkpoints, n) for n in NODE_COUNTS}
     lines = [
         "# Table I, reproduced",
         "",

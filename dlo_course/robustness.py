@@ -32,6 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 from dlo_course.randomisation import PERTURBABLE, scale_params, validate_factors
+from dlo_course.task import TABLE_THRESHOLDS, TRAIN_THRESHOLD, ObservationLayout
 
 
 # ------------------------------------------------------------------ model mismatch
@@ -50,16 +51,11 @@ def parse_perturbation(text: str) -> tuple[str, float]:
 
 
 # ------------------------------------------------------------------ sensing noise
-def nodes_slice(n_nodes: int) -> slice:
-    """Where P_c, the current positions of the m selected nodes, sits in an observation:
-    indices 6 .. 6 + 3m (after the tip's position and velocity, before P_d)."""
-    return slice(6, 6 + 3 * int(n_nodes))
-
-
 def add_observation_noise(obs: np.ndarray, n_nodes: int, std: float,
                           rng: np.random.Generator) -> np.ndarray:
     """A copy of the observation(s) ``obs`` (..., 6 + 6m) with Gaussian noise of standard
-    deviation ``std`` (m) added to the P_c slice only (:func:`nodes_slice`): the tip's
+    deviation ``std`` (m) added to the P_c slice only (``ObservationLayout(n_nodes).current``,
+    :class:`dlo_course.task.ObservationLayout`): the tip's
     position and velocity and the goal P_d are left exactly as they were.
 
     The noise is one ``rng.normal(0, std, size)`` draw of the slice's shape; ``std == 0``
@@ -73,12 +69,11 @@ def add_observation_noise(obs: np.ndarray, n_nodes: int, std: float,
     if not (math.isfinite(std) and std >= 0):
         raise ValueError(f"the noise standard deviation must be >= 0 (m), got {std}")
     noisy = np.array(obs, copy=True)
-    if noisy.shape[-1] != 6 + 6 * int(n_nodes):
-        raise ValueError(f"an observation of {n_nodes} nodes has {6 + 6 * n_nodes} "
-                         f"components, got {noisy.shape[-1]}")
+    layout = ObservationLayout(int(n_nodes))
+    layout.check(noisy)
     if std == 0:
         return noisy
-    part = nodes_slice(n_nodes)
+    part = layout.current
     noise = rng.normal(0.0, std, size=noisy[..., part].shape)
     noisy[..., part] = noisy[..., part] + noise
     return noisy
@@ -166,7 +161,6 @@ NOMINAL = "nominal"
 """The parameter name of the unperturbed setting (every factor 1, no noise)."""
 NOISE = "obs_noise"
 """The parameter name of the observation-noise settings (value: the noise's std in m)."""
-RESULT_THRESHOLDS = (0.05, 0.03)
 
 
 def setting_file(out_dir, controller: str, parameter: str, value: float):
@@ -181,7 +175,7 @@ def setting_file(out_dir, controller: str, parameter: str, value: float):
 
 def run_setting(agent, controller: str, parameter: str, value: float, out_dir,
                 episodes: int = 20, seed: int = 0, goals: str = "small-test",
-                thresholds: Sequence[float] = RESULT_THRESHOLDS, show_progress: bool = True
+                thresholds: Sequence[float] = TABLE_THRESHOLDS, show_progress: bool = True
                 ) -> dict:
     """Evaluate ``agent`` (a trained agent's folder or a Controller, called ``controller`` in
     the files) in one perturbed setting and write it as JSON: the paper's protocol with
@@ -251,7 +245,7 @@ def load_results(out_dir) -> list[dict]:
     return sorted(records, key=key)
 
 
-def curves(results: Sequence[dict], threshold: float = 0.05) -> dict:
+def curves(results: Sequence[dict], threshold: float = TRAIN_THRESHOLD) -> dict:
     """The robustness curves in ``results``: ``{(controller, parameter): rows}`` for every
     perturbed parameter (:data:`PERTURBABLE` or :data:`NOISE`), rows sorted by value, each
     ``(value, done %, Wilson 95% low, high, episodes)`` at ``threshold``. The nominal setting
@@ -278,7 +272,7 @@ def curves(results: Sequence[dict], threshold: float = 0.05) -> dict:
     return {k: sorted(set(rows)) for k, rows in sorted(points.items())}
 
 
-def results_table(results: Sequence[dict], thresholds: Sequence[float] = RESULT_THRESHOLDS
+def results_table(results: Sequence[dict], thresholds: Sequence[float] = TABLE_THRESHOLDS
                   ) -> str:
     """A Markdown table of ``results``: one row per setting, done % with its Wilson 95%
     interval and the mean final distance at each threshold."""
@@ -302,7 +296,7 @@ def results_table(results: Sequence[dict], thresholds: Sequence[float] = RESULT_
     return "\n".join(lines)
 
 
-def plot_results(results: Sequence[dict], out=None, threshold: float = 0.05):
+def plot_results(results: Sequence[dict], out=None, threshold: float = TRAIN_THRESHOLD):
     """Done % at ``threshold`` against each change (one panel per perturbed parameter, one
     line per controller), with Wilson 95% intervals; saved to ``out`` when given.
 

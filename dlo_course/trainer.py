@@ -51,16 +51,14 @@ import torch
 from tqdm.auto import tqdm
 
 from dlo_course import mpi, rundir
-# The configurations' old home: notebooks and tests import them from here.
-from dlo_course.config import PRESETS, DDPGConfig, TrainConfig, preset  # noqa: F401
+from dlo_course.config import TrainConfig
 from dlo_course.database import load_database
 from dlo_course.ddpg import DDPG, UpdateRules
 from dlo_course.evaluation import run_traces
 from dlo_course.her import HindsightRelabeller
 from dlo_course.noise import OUNoise
 from dlo_course.replay_buffer import ReplayBuffer
-from dlo_course.rundir import PROGRESS_COLUMNS, VALIDATION_COLUMNS, format_cell  # noqa: F401
-from dlo_course.rundir import load_config  # noqa: F401  (its old home)
+from dlo_course.rundir import VALIDATION_COLUMNS, format_cell
 
 
 # --- one episode of one agent ---
@@ -336,7 +334,7 @@ def make_env(config: TrainConfig) -> gymnasium.Env:
 
 
 def observation_reference(env: gymnasium.Env) -> tuple[np.ndarray, np.ndarray]:
-    """(offset, scale) for ``DDPGConfig.normalize_obs``: the environment's own
+    """(offset, scale) for ``dlo_course.config.DDPGConfig.normalize_obs``: the environment's own
     ``observation_reference()`` if it has one (the rod), else the centre and half-width of a
     bounded observation space."""
     if hasattr(env.unwrapped, "observation_reference"):
@@ -354,7 +352,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
     """Train DDPG agents as configured; every MPI rank runs this function as one agent.
 
     Args:
-        config: the run's configuration (see :data:`PRESETS`).
+        config: the run's configuration (see :data:`dlo_course.config.PRESETS`).
         resume: continue from the resume state in ``config.out_dir`` (start afresh if
             there is none). ``episodes`` may be raised to train a finished run further.
         progress: show a progress bar (rank 0 only).

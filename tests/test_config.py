@@ -6,8 +6,9 @@ import sys
 
 from click.testing import CliRunner
 
-from dlo_course import config, ddpg, trainer
+from dlo_course import config
 from dlo_course.cli import main
+from dlo_course.task import DEFAULT_N_NODES
 
 
 def test_importing_the_config_and_the_command_line_imports_neither_torch_nor_pybullet():
@@ -19,10 +20,7 @@ def test_importing_the_config_and_the_command_line_imports_neither_torch_nor_pyb
     assert result.returncode == 0, result.stdout + result.stderr
 
 
-def test_the_old_homes_still_export_the_configurations():
-    assert ddpg.DDPGConfig is config.DDPGConfig
-    assert trainer.TrainConfig is config.TrainConfig
-    assert trainer.PRESETS is config.PRESETS and trainer.preset is config.preset
+def test_every_preset_has_a_summary():
     assert set(config.PRESET_SUMMARIES) == set(config.PRESETS)
 
 
@@ -31,4 +29,7 @@ def test_the_command_line_help_reads_its_defaults_from_the_dataclasses():
     for name, summary in config.PRESET_SUMMARIES.items():
         assert f"{name} ({summary})" in help_text
     assert f"the paper: {config.DDPGConfig().batch_size}]" in help_text
-    assert config.paper_default(config.TrainConfig, "env_kwargs") == {"n_nodes": 2}
+    assert config.paper_default(config.TrainConfig, "env_kwargs") == {"n_nodes": DEFAULT_N_NODES}
+    # the presets that trained the first agent keep their 2 nodes
+    assert {name: c.env_kwargs["n_nodes"] for name, c in config.PRESETS.items()} == {
+        "smoke": 2, "laptop": 2, "paper": 2, "course": 2, "recipe": 4}

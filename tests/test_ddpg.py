@@ -3,8 +3,9 @@ import pytest
 import torch
 
 import dlo_course.ddpg as ddpg_module
-from dlo_course.ddpg import (DDPG, Actor, Critic, DDPGConfig, bellman_target, critic_loss,
-                             load_network, polyak_update, policy_loss, save_network)
+from dlo_course.config import DDPGConfig
+from dlo_course.ddpg import (DDPG, Actor, Critic, bellman_target, critic_loss, load_network,
+                             polyak_update, policy_loss, save_network)
 
 SMALL = DDPGConfig(hidden_sizes=(16, 16), batch_size=8)
 

@@ -7,9 +7,10 @@ import pytest
 import torch
 
 from dlo_course import diagnostics
-from dlo_course.ddpg import Actor, Critic, DDPGConfig
+from dlo_course.config import DDPGConfig, TrainConfig
+from dlo_course.ddpg import Actor, Critic
 from dlo_course.replay_buffer import ReplayBuffer
-from dlo_course.trainer import TrainConfig, train
+from dlo_course.trainer import train
 
 
 def test_saturation_report_by_hand():

@@ -13,7 +13,7 @@ from dlo_course.ddpg import Actor, Critic, save_network
 from dlo_course.env import DLOShapeEnv
 from dlo_course.simulation import SimParams
 from dlo_course.evaluation import (
-    CheckpointError, EpisodeRecord, EpisodeTrace, TrainedAgentError, evaluate,
+    EpisodeRecord, EpisodeTrace, TrainedAgentError, evaluate,
     evaluate_thresholds, goal_schedule, load_actor, run_episodes, run_traces, summarize,
     wilson_interval,
 )
@@ -76,25 +76,24 @@ def goals_2():
 
 
 def test_bad_trained_agents_give_clear_errors(tmp_path, checkpoint):
-    assert CheckpointError is TrainedAgentError  # the old name still works
     with pytest.raises(TrainedAgentError, match="no trained agent"):
         load_actor(tmp_path / "nowhere")
     corrupt = tmp_path / "corrupt"
     corrupt.mkdir()
     (corrupt / "actor.pt").write_bytes(b"\x00garbage")
-    with pytest.raises(CheckpointError, match="not a readable"):
+    with pytest.raises(TrainedAgentError, match="not a readable"):
         load_actor(corrupt)
     critic = tmp_path / "critic"
     critic.mkdir()
     save_network(Critic(obs_dim=18, act_dim=3), critic / "actor.pt")
-    with pytest.raises(CheckpointError, match="not an Actor"):
+    with pytest.raises(TrainedAgentError, match="not an Actor"):
         load_actor(critic)
     pendulum = tmp_path / "pendulum"
     pendulum.mkdir()
     save_network(Actor(obs_dim=3, act_dim=1), pendulum / "actor.pt")
-    with pytest.raises(CheckpointError, match="not trained on DLOShape"):
+    with pytest.raises(TrainedAgentError, match="not trained on DLOShape"):
         load_actor(pendulum)
-    with pytest.raises(CheckpointError, match="trained for 2 nodes"):
+    with pytest.raises(TrainedAgentError, match="trained for 2 nodes"):
         load_actor(checkpoint, n_nodes=6)
     actor, n_nodes = load_actor(checkpoint)
     assert n_nodes == 2 and not actor.training
@@ -259,16 +258,16 @@ def test_recorded_tip_controller_heads_for_the_recorded_tip():
 def test_shipped_agents_load_with_their_training_record(n_nodes):
     import json
 
-    from dlo_course.paths import CHECKPOINT_DIR
+    from dlo_course.paths import AGENTS_DIR
 
-    folder = CHECKPOINT_DIR / f"nodes{n_nodes}"
+    folder = AGENTS_DIR / f"nodes{n_nodes}"
     actor, nodes = load_actor(folder)
     assert nodes == n_nodes and actor.init_kwargs["obs_dim"] == 6 + 6 * n_nodes
     record = json.loads((folder / "record.json").read_text())
     for key in ("ranks", "episodes_per_agent", "transitions", "wall_time_h", "seed", "commit"):
         assert record[key] is not None, key
     other = 4 if n_nodes != 4 else 6
-    with pytest.raises(CheckpointError, match=f"trained for {n_nodes} nodes"):
+    with pytest.raises(TrainedAgentError, match=f"trained for {n_nodes} nodes"):
         load_actor(folder, other)
 
 

@@ -99,9 +99,10 @@ def test_cluster_script_runs_the_whole_pipeline_with_the_smoke_preset(tmp_path):
 
 
 def test_ship_run_copies_the_networks_and_writes_the_training_record(tmp_path):
-    from dlo_course.ddpg import DDPGConfig
-    from dlo_course.reproduce import course_options, ship_run, training_record
-    from dlo_course.trainer import TrainConfig, train
+    from dlo_course.config import DDPGConfig, TrainConfig
+    from dlo_course.reproduce import course_options
+    from dlo_course.rundir import ship_run, training_record
+    from dlo_course.trainer import train
 
     run = train(TrainConfig(env_id="Pendulum-v1", env_kwargs={}, episodes=2,
                             steps_per_episode=20, out_dir=str(tmp_path / "run"), seed=4,

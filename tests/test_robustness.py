@@ -1,5 +1,5 @@
-"""dlo_course.robustness and dlo_course.randomisation: a perturbed world really is perturbed in PyBullet, nonsense values
-are refused, the observation noise touches only P_c (seeded, zero noise the identity), domain
+"""dlo_course.robustness and dlo_course.randomisation: a perturbed world really is perturbed
+in PyBullet, nonsense values are refused, the observation noise touches only P_c (seeded, zero noise the identity), domain
 randomisation is seeded and reaches the scene, and `dlo-course evaluate` takes both."""
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from dlo_course.cli import main
 from dlo_course.randomisation import draw_factors, scale_params, validate_factors, validate_ranges
 from dlo_course.robustness import ObservationNoise, add_observation_noise
 from dlo_course.simulation import RodScene, SimParams
+from dlo_course.task import ObservationLayout
 
 SETTLE_STEPS = 10  # 30 ms: the rod, released straight, compresses under its own weight
 
@@ -109,7 +110,7 @@ def test_noise_touches_only_the_current_node_positions():
     env = ObservationNoise(FakeRod(), std=0.01, seed=3)
     obs, info = env.reset()
     clean = env.unwrapped.obs
-    part = robustness.nodes_slice(4)
+    part = ObservationLayout(4).current
     assert part == slice(6, 18)
     changed = obs != clean
     assert changed[part].all() and not changed[:6].any() and not changed[18:].any()

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from dlo_course import evaluation, learning_curves, reproduce, rundir
+from dlo_course import evaluation, rundir
 from dlo_course.paths import AGENTS_DIR, REPO_ROOT
 
 
@@ -29,13 +29,6 @@ def test_keep_episodes_cuts_a_log(tmp_path):
     assert log.read_text().splitlines() == ["episode,reward_mean", "1,-3", "2,-2"]
 
 
-def test_the_old_import_paths_still_work():
-    assert reproduce.ship_run is rundir.ship_run
-    assert reproduce.training_record is rundir.training_record
-    assert reproduce.checkpoint_dir is rundir.agent_dir
-    assert learning_curves.read_progress is rundir.read_progress
-    assert evaluation.CheckpointError is evaluation.TrainedAgentError
-    assert evaluation.CHECKPOINT_FILE == rundir.ACTOR_FILE
 
 
 @pytest.mark.parametrize("n_nodes", [2, 4, 6])

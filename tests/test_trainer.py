@@ -9,13 +9,12 @@ import torch
 from click.testing import CliRunner
 
 from dlo_course.cli import main, train as train_command
-from dlo_course.ddpg import DDPG, DDPGConfig, load_network
-from dlo_course.learning_curves import read_progress
+from dlo_course.config import PRESETS, DDPGConfig, TrainConfig, preset
+from dlo_course.ddpg import DDPG, load_network
 from dlo_course.noise import OUNoise
-from dlo_course.reproduce import ship_run
 from dlo_course.replay_buffer import ReplayBuffer
-from dlo_course.trainer import (PRESETS, PROGRESS_COLUMNS, TrainConfig, load_config, make_env,
-                                preset, run_episode, train, validation_indices)
+from dlo_course.rundir import PROGRESS_COLUMNS, load_config, read_progress, ship_run
+from dlo_course.trainer import make_env, run_episode, train, validation_indices
 
 
 # --- tiny test environments ---

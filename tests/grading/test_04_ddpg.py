@@ -7,6 +7,7 @@ import pytest
 import torch
 
 from dlo_course import ddpg
+from dlo_course.config import DDPGConfig
 from dlo_course.noise import OUNoise
 
 pytestmark = pytest.mark.notebook("04_ddpg")
@@ -165,7 +166,7 @@ def update_agent():
     """A small agent of the paper's kind whose targets trail its networks (as after some
     training), so that using the networks instead of the targets shows."""
     torch.manual_seed(41)
-    agent = ddpg.DDPG(5, 2, -1.0, 1.0, ddpg.DDPGConfig(hidden_sizes=(16, 16), tau=0.1,
+    agent = ddpg.DDPG(5, 2, -1.0, 1.0, DDPGConfig(hidden_sizes=(16, 16), tau=0.1,
                                                         gamma=0.9))
     with torch.no_grad():
         for net in (agent.actor_target, agent.critic_target):

@@ -11,8 +11,9 @@ import gymnasium
 import numpy as np
 import pytest
 
+from dlo_course.config import TrainConfig
 from dlo_course.replay_buffer import ReplayBuffer
-from dlo_course.trainer import TrainConfig, run_episode
+from dlo_course.trainer import run_episode
 
 pytestmark = pytest.mark.notebook("09_training_ddpg_on_the_dlo")
 

@@ -13,7 +13,8 @@ import numpy as np
 import torch
 
 from dlo_course import mpi
-from dlo_course.ddpg import DDPG, DDPGConfig
+from dlo_course.config import DDPGConfig
+from dlo_course.ddpg import DDPG
 
 op, result_path = sys.argv[1], sys.argv[2]
 torch.set_num_threads(1)
