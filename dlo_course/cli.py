@@ -22,6 +22,7 @@ from dlo_course.config import (PRESET_SUMMARIES, PRESETS, DDPGConfig, TrainConfi
                                config_fields, experiment_config, field_docs, field_types,
                                paper_default, preset_table, read_toml)
 from dlo_course.database import BOXES, GOAL_SOURCES, DatabaseError
+from dlo_course.mpi_env import import_pybullet_quietly
 from dlo_course.paths import DATA_DIR
 from dlo_course.task import DEFAULT_N_NODES, NODE_COUNTS, TRAIN_THRESHOLD
 
@@ -55,6 +56,7 @@ def _paper(config_class: type, name: str) -> str:
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 def main() -> None:
     """dlo-course: deep RL for the shape control of deformable linear objects."""
+    import_pybullet_quietly()  # under mpiexec: PyBullet's banner from rank 0 only
 
 
 @main.command()

@@ -18,7 +18,6 @@ and mpi4py is not even imported: a notebook never starts MPI by accident.
 from __future__ import annotations
 
 import hashlib
-import os
 import sys
 from typing import Any, Sequence
 
@@ -26,10 +25,7 @@ import numpy as np
 import torch
 from torch import nn
 
-# Environment variables that MPI launchers set in the processes they start (MPICH/Hydra and
-# Slurm's PMI, PMIx, Open MPI). Their absence means "not started by mpiexec".
-_LAUNCHER_VARS = ("PMI_RANK", "PMI_SIZE", "PMIX_RANK", "OMPI_COMM_WORLD_SIZE",
-                  "MPI_LOCALNRANKS")
+from dlo_course.mpi_env import launched
 
 _comm: Any = None
 _comm_checked = False
@@ -39,8 +35,7 @@ def comm() -> Any:
     """The world communicator (``mpi4py.MPI.COMM_WORLD``), or ``None`` for a single process."""
     global _comm, _comm_checked
     if not _comm_checked:
-        launched = any(v in os.environ for v in _LAUNCHER_VARS)
-        if launched or "mpi4py.MPI" in sys.modules:
+        if launched() or "mpi4py.MPI" in sys.modules:
             try:
                 from mpi4py import MPI
             except ImportError as err:
