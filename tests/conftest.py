@@ -1,4 +1,11 @@
-"""Shared fixtures. Simulator tests are sized for 2 cores: a handful of actions each."""
+"""Shared fixtures, and the fast lane's marks. Simulator tests are sized for 2 cores: a handful
+of actions each.
+
+The fast lane, ``python -m pytest -m "not slow" -n 2``, checks the library in about a minute;
+CI runs every test. ``slow`` marks a test that executes notebooks, grades, starts mpiexec,
+trains, or simulates for more than a few seconds: on the test itself, with ``pytestmark`` on a
+whole file, or here for the files listed in :data:`SLOW_FILES` and every ``mpi`` test.
+"""
 
 from __future__ import annotations
 
@@ -7,6 +14,20 @@ import pytest
 
 import dlo_course  # noqa: F401  (registers DLOShape-v0)
 from dlo_course.env import DLOShapeEnv
+
+SLOW_FILES = {
+    "test_course.py": "executes the 16 solution notebooks and grades them",
+    "test_grading_attacks.py": "grades attacks in the sandbox",
+    "test_mutations.py": "48 mutation rounds, each a grading in a pytest subprocess",
+}
+"""Files whose every test is slow, by name (marked here: they are being moved with the
+grader, so they are not edited for it now)."""
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        if item.path.name in SLOW_FILES or item.get_closest_marker("mpi"):
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture

@@ -64,6 +64,7 @@ class CountingScene(RodScene):
         super().step_physics(n)
 
 
+@pytest.mark.slow
 def test_two_physics_steps_per_recorded_move():
     scene = CountingScene()
     counts = []

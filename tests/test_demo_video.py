@@ -7,6 +7,7 @@ from __future__ import annotations
 import stat
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 from PIL import Image
 
@@ -14,6 +15,8 @@ from dlo_course import plots
 from dlo_course.cli import main
 from dlo_course.demo import DEFAULT_GOAL_INDEX, run_demo
 from dlo_course.paths import DATA_DIR
+
+pytestmark = pytest.mark.slow  # every test resets the simulator and renders
 
 SHIPPED_AGENT = DATA_DIR / "checkpoints" / "nodes4"
 WIDTH, HEIGHT = 64, 48

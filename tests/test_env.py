@@ -30,6 +30,7 @@ def test_time_settings():
         SimParams(time_mode="fast")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n_nodes,size", [(2, 18), (4, 30), (6, 42)])
 def test_observation_layout(make_env, n_nodes, size):
     goals = np.full((1, n_nodes, 3), 0.5)
@@ -46,6 +47,7 @@ def test_observation_layout(make_env, n_nodes, size):
     assert set(info) >= {"distance", "is_success", "tip_position", "goal_index"}
 
 
+@pytest.mark.slow
 def test_reward_is_minus_mean_distance_of_the_nodes(make_env, far_goals):
     env = make_env(n_nodes=4, goals=far_goals)
     env.reset(seed=1)
@@ -61,6 +63,7 @@ def test_reward_is_minus_mean_distance_of_the_nodes(make_env, far_goals):
         assert mean_node_distance(p_c, p_d) == pytest.approx(expected, abs=1e-5)
 
 
+@pytest.mark.slow
 def test_termination_at_the_threshold(make_env):
     env = make_env(n_nodes=2, goals=np.zeros((1, 2, 3)))
     env.reset(seed=0)
@@ -105,6 +108,7 @@ def test_reset_with_and_without_reinitialization(make_env, far_goals):
     np.testing.assert_array_equal(env.scene.node_positions(), initial)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("n_nodes", [2, 6])
 def test_reset_settles_the_world_as_the_authors_did(make_env, n_nodes):
     env = make_env(n_nodes=n_nodes, goals=np.full((1, n_nodes, 3), 0.5))
@@ -129,6 +133,7 @@ def test_reset_settles_the_world_as_the_authors_did(make_env, n_nodes):
         SimParams(reset_settle_steps=-1)
 
 
+@pytest.mark.slow
 def test_same_seed_same_trajectory(make_env, far_goals):
     def rollout():
         env = make_env(n_nodes=4, goals=far_goals)
@@ -144,6 +149,7 @@ def test_same_seed_same_trajectory(make_env, far_goals):
     np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.slow
 def test_custom_goal_arrays(make_env):
     goals = np.random.default_rng(0).uniform(0.2, 1.2, size=(5, 6, 3))
     env = make_env(n_nodes=6, goals=goals)
@@ -178,6 +184,7 @@ def test_bad_constructor_arguments():
         DLOShapeEnv(n_nodes=2, goals="medium")
 
 
+@pytest.mark.slow
 def test_bad_actions_and_options(make_env, far_goals):
     env = make_env(n_nodes=4, goals=far_goals)
     with pytest.raises(RuntimeError):
@@ -194,6 +201,7 @@ def test_bad_actions_and_options(make_env, far_goals):
         env.reset(options={"goal_index": 99})
 
 
+@pytest.mark.slow
 def test_out_of_range_actions_are_clipped(make_env, far_goals):
     results = []
     for action in ([3.0, -7.0, 0.5], [1.0, -1.0, 0.5]):
@@ -203,6 +211,7 @@ def test_out_of_range_actions_are_clipped(make_env, far_goals):
     np.testing.assert_array_equal(results[0], results[1])
 
 
+@pytest.mark.slow
 def test_tip_target_stays_in_the_workspace(make_env, far_goals):
     env = make_env(n_nodes=4, goals=far_goals)
     env.reset(seed=0)
@@ -214,6 +223,7 @@ def test_tip_target_stays_in_the_workspace(make_env, far_goals):
     assert np.all(target <= high + 1e-12) and np.all(target >= low - 1e-12)
 
 
+@pytest.mark.slow
 def test_a_blown_up_simulation_ends_the_episode_without_nans(make_env, far_goals):
     # Undamped 3 ms sub-steps, far above the stable 0.3 ms: the rod explodes within a few
     # actions of shaking.
@@ -232,6 +242,7 @@ def test_a_blown_up_simulation_ends_the_episode_without_nans(make_env, far_goals
     assert np.all(np.isfinite(obs)) and not info["simulation_unstable"]
 
 
+@pytest.mark.slow
 def test_rendering_never_changes_the_physics(make_env, far_goals):
     trajectories = []
     for render in (False, True):
@@ -258,6 +269,7 @@ def test_gymnasium_registration_and_time_limit(far_goals):
     assert gym.spec("DLOShape-v0").max_episode_steps == 300
 
 
+@pytest.mark.slow
 def test_check_env(make_env, far_goals):
     env = make_env(n_nodes=2, goals=far_goals[:, :2])
     check_env(env, skip_render_check=True)
@@ -279,6 +291,7 @@ def test_the_step_limit_is_only_gymnasiums_time_limit(far_goals):
         env.close()
 
 
+@pytest.mark.slow
 def test_two_environments_in_one_process_are_independent(make_env, far_goals):
     a = make_env(n_nodes=4, goals=far_goals)
     b = make_env(n_nodes=4, goals=far_goals)
@@ -291,6 +304,7 @@ def test_two_environments_in_one_process_are_independent(make_env, far_goals):
     np.testing.assert_array_equal(b.scene.node_positions(), untouched)
 
 
+@pytest.mark.slow
 def test_paper_time_is_twenty_code_steps_per_action():
     from dlo_course.simulation import RodScene
 
@@ -308,6 +322,7 @@ def test_paper_time_is_twenty_code_steps_per_action():
         paper.close()
 
 
+@pytest.mark.slow
 def test_observation_reference_makes_observations_of_order_one(make_env, far_goals):
     env = make_env(n_nodes=4, goals=far_goals)
     offset, scale = env.observation_reference()

@@ -99,6 +99,7 @@ def test_bad_trained_agents_give_clear_errors(tmp_path, checkpoint):
     assert n_nodes == 2 and not actor.training
 
 
+@pytest.mark.slow
 def test_parallel_split_equals_one_process_with_reinitialization(checkpoint, goals_2):
     actor, _ = load_actor(checkpoint)
     schedule = goal_schedule(len(goals_2), 4, seed=3)
@@ -121,6 +122,7 @@ def test_one_trace_scores_every_threshold_above_its_own():
     assert EpisodeTrace(0.2, ()).record(0, 0, 0.05).final_distance == 0.2
 
 
+@pytest.mark.slow
 def test_shared_thresholds_equal_separate_runs(checkpoint, goals_2):
     """With reinitialisation, one run at 0.03 m scores 0.05 m exactly as a run at 0.05 m
     does; episodes with a goal already played are not simulated again."""
@@ -133,6 +135,7 @@ def test_shared_thresholds_equal_separate_runs(checkpoint, goals_2):
     assert any(r.done for r in shared[0.05][1])  # the test means something at 0.05 m
 
 
+@pytest.mark.slow
 def test_repeated_goals_are_simulated_once_with_reinitialization(checkpoint, goals_2):
     actor, _ = load_actor(checkpoint)
     env = DLOShapeEnv(n_nodes=2, goals=goals_2, threshold=0.05)
@@ -148,6 +151,7 @@ def test_repeated_goals_are_simulated_once_with_reinitialization(checkpoint, goa
     assert [r.episode for r in records] == [0, 1, 2]
 
 
+@pytest.mark.slow
 def test_forked_episodes_equal_rebuilt_ones_bit_for_bit(checkpoint, goals_2):
     """With reinitialisation the world is settled once and each episode runs in a forked
     copy of it (dlo_course.snapshot): the same traces as rebuilding before every episode,

@@ -108,6 +108,7 @@ def test_environments_without_the_goal_layout_are_refused():
 
 # --- one short episode on the rod (runs the real simulator: a handful of actions) ---
 
+@pytest.mark.slow
 def test_relabelled_rewards_are_the_rods_rewards_for_the_substituted_goal():
     """Play 3 actions, then replay them in an environment whose goals are the shapes the rod
     reached: its rewards and terminations are the relabelled ones."""

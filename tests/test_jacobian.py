@@ -128,6 +128,7 @@ def test_controller_probes_then_steps_within_the_action_box():
     assert controller.jacobian is None
 
 
+@pytest.mark.slow
 def test_controller_reduces_the_distance_to_a_near_goal_on_the_rod(make_env):
     # The goal: where the 2 nodes were after the tip moved 3 cm along -x and +y and rested.
     from dlo_course.simulation import RodScene  # noqa: F401  (PyBullet)

@@ -162,6 +162,7 @@ def test_evaluation_runs_are_kept_and_reused(tmp_path, monkeypatch):
                                  cache=tmp_path / "runs")
 
 
+@pytest.mark.slow
 def test_cli_reproduce_evaluates_a_controller_beside_the_agents(tmp_path, monkeypatch):
     """`dlo-course reproduce --controller jacobian`: the controller's cells beside the agents',
     in its own table and in the report. Cheap: two cells (one shared run each for the agents

@@ -176,6 +176,7 @@ def test_bad_ranges_are_refused(ranges, message):
         validate_ranges(ranges)
 
 
+@pytest.mark.slow
 def test_domain_randomisation_in_the_environment(make_env):
     base = make_env(n_nodes=4, goals="small-test")
     assert base.randomize == {} and base.sim_factors == {}  # off by default

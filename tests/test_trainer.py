@@ -408,6 +408,7 @@ def test_levers_are_recorded_and_set_from_the_command_line(tmp_path):
     assert result.exit_code == 1 and "needs DLOShape-v0" in result.output
 
 
+@pytest.mark.slow
 def test_keep_shape_between_episodes_on_the_rod(tmp_path):
     """reset_between_episodes=False: episode 2 starts from the shape episode 1 ended in;
     True: from the initial shape. Runs the real simulator: 2 x 2 episodes of 3 actions."""
@@ -457,6 +458,7 @@ def test_keep_shape_between_episodes_on_the_rod(tmp_path):
     np.testing.assert_array_equal(starts_rebuilt[0], starts[0])
 
 
+@pytest.mark.slow
 def test_recipe_smoke_run_on_the_rod(tmp_path):
     """The recipe's levers together, on the real rod, in one process: 2 episodes of 6
     actions (a batch of 16 so that updates start), then a resume for one more episode."""
