@@ -38,8 +38,9 @@ import numpy as np
 
 from dlo_course import mpi
 from dlo_course.evaluation import evaluate_thresholds
-from dlo_course.learning_curves import read_progress
-from dlo_course.trainer import TrainConfig, preset, train
+from dlo_course.rundir import read_progress
+from dlo_course.config import TrainConfig, preset
+from dlo_course.trainer import train
 
 RUNS = Path("runs/ablation")  # changed by --runs
 RESULTS = Path(__file__).parent / "results" / "ablation"  # changed by --results

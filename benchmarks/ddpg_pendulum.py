@@ -35,8 +35,10 @@ import numpy as np
 import torch
 
 from dlo_course.ddpg import load_network
-from dlo_course.learning_curves import plot_learning_curves, read_progress
-from dlo_course.trainer import TrainConfig, train
+from dlo_course.plots import plot_learning_curves
+from dlo_course.rundir import read_progress
+from dlo_course.config import TrainConfig
+from dlo_course.trainer import train
 
 RESULTS = Path(__file__).parent / "results"
 EPISODE_STEPS = 200

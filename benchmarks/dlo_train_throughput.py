@@ -16,7 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from dlo_course.learning_curves import read_progress
+from dlo_course.rundir import read_progress
 
 
 def run(n_ranks: int, episodes: int, steps: int, out: Path) -> float:
