@@ -24,7 +24,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))  # runs from a checkout, installed or not
 
-from dlo_course import course  # noqa: E402
+from dlo_course.grading.notebooks import notebooks_in, read_notebook, write_notebook
 from dlo_course.notebook import binder_url, colab_url, install_cell_source  # noqa: E402
 
 BADGES_BEGIN = "<!-- badges: begin -->"
@@ -69,12 +69,12 @@ def with_badges(readme: str, notebooks: list[Path]) -> str:
 
 
 def main() -> None:
-    notebooks = course.notebooks_in(ROOT / "solutions")
+    notebooks = notebooks_in(ROOT / "solutions")
     for path in notebooks:
-        nb = course.read_notebook(path)
+        nb = read_notebook(path)
         updated = with_install_cell(nb, path.name[:2])
         if updated != nb:
-            course.write_notebook(updated, path)
+            write_notebook(updated, path)
             print(f"updated {path.relative_to(ROOT)}")
     readme = ROOT / "lessons" / "README.md"
     text = readme.read_text(encoding="utf-8")

@@ -603,25 +603,27 @@ def course_group() -> None:
 def course_release(solutions: Path | None, lessons: Path | None, check: bool,
                    student_dir: Path | None, tests: Path | None) -> None:
     """Write lessons/ from solutions/: solutions replaced by NotImplementedError, no outputs."""
-    from dlo_course import course as course_lib
+    from dlo_course.grading.bundle import release_student
+    from dlo_course.grading.notebooks import (GRADING_TESTS_DIR, LESSONS_DIR, SOLUTIONS_DIR,
+                                              exercises, release)
 
-    solutions = solutions or course_lib.SOLUTIONS_DIR
-    lessons = lessons or course_lib.LESSONS_DIR
+    solutions = solutions or SOLUTIONS_DIR
+    lessons = lessons or LESSONS_DIR
     if tests is not None and student_dir is None:
         raise click.UsageError("--tests only applies to a student bundle (--student DIR)")
     if student_dir is not None:
-        if check or lessons != course_lib.LESSONS_DIR:
+        if check or lessons != LESSONS_DIR:
             raise click.UsageError("--student writes a whole bundle: no --check or --lessons")
         try:
-            files = course_lib.release_student(student_dir, solutions=solutions,
-                                               tests=tests or course_lib.GRADING_TESTS_DIR)
+            files = release_student(student_dir, solutions=solutions,
+                                    tests=tests or GRADING_TESTS_DIR)
         except (ValueError, FileNotFoundError) as err:
             raise click.ClickException(str(err)) from err
         click.echo(f"wrote the student bundle to {student_dir}: {len(files)} files, without "
                    f"solutions/ and the tests that hold answers")
         return
     try:
-        result = course_lib.release(solutions, lessons, check=check)
+        result = release(solutions, lessons, check=check)
     except (ValueError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from err
     if check:
@@ -630,7 +632,7 @@ def course_release(solutions: Path | None, lessons: Path | None, check: bool,
                                        "release`:\n  " + "\n  ".join(result))
         click.echo(f"{lessons} is up to date with {solutions}")
         return
-    graded = course_lib.exercises(solutions)
+    graded = exercises(solutions)
     written = sum(1 for e in graded if e.get("kind") == "text")
     click.echo(f"wrote {len(result)} notebooks ({len(graded) - written} exercises, {written} "
                f"written answers) to {lessons}")
@@ -649,11 +651,11 @@ def course_release(solutions: Path | None, lessons: Path | None, check: bool,
 def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: float,
                  jobs: int) -> None:
     """Grade SUBMISSIONS/<student>/ notebook folders; one CSV row of points per student."""
-    from dlo_course import course as course_lib
+    from dlo_course.grading.grade import grade
+    from dlo_course.grading.notebooks import GRADING_TESTS_DIR
 
     try:
-        rows = course_lib.grade(submissions, out, tests or course_lib.GRADING_TESTS_DIR,
-                                timeout=timeout, jobs=jobs)
+        rows = grade(submissions, out, tests or GRADING_TESTS_DIR, timeout=timeout, jobs=jobs)
     except (ValueError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from err
     for row in rows:

@@ -1,9 +1,8 @@
 """Helpers for the lesson notebooks: how long to run, and where to write.
 
 Every lesson imports these two, and nothing else of the grading machinery: ``from
-dlo_course.notebook import fast_mode, output_dir``. (``dlo_course.course`` re-exports them for
-notebooks written before this module existed.) Exercise cells may use them too: they hold no
-answer.
+dlo_course.notebook import fast_mode, output_dir``. Exercise cells may use them too: they
+hold no answer (:data:`dlo_course.grading.delegation.LIBRARY_HELPERS`).
 
 Also here: what runs the lessons in the browser, the Colab install cell
 (:func:`colab_install_command`, :func:`install_cell_source`) and the Colab and Binder links

@@ -19,18 +19,21 @@ from pathlib import Path
 import pytest
 from click.testing import CliRunner
 
-from dlo_course import course
 from dlo_course.cli import main
+from dlo_course.grading import bundle as bundle_module
+from dlo_course.grading import notebooks
+from dlo_course.grading.bundle import STUDENT_EXCLUDE, release_student
+from dlo_course.grading.grade import grade, grading_command
 
 REPO = Path(__file__).resolve().parents[1]
 SOLUTIONS, LESSONS = REPO / "solutions", REPO / "lessons"
-NOTEBOOKS = course.notebooks_in(SOLUTIONS)
+NOTEBOOKS = notebooks.notebooks_in(SOLUTIONS)
 
 
 def run_grader(notebooks: Path, tmp_path: Path, timeout_per_exercise: float = 60) -> dict:
     out = tmp_path / f"grades_{notebooks.name}.json"
     env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT=str(timeout_per_exercise))
-    proc = subprocess.run(course.grading_command(notebooks, json_out=out), cwd=REPO, env=env,
+    proc = subprocess.run(grading_command(notebooks, json_out=out), cwd=REPO, env=env,
                           capture_output=True, text=True, timeout=600)
     assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     report = json.loads(out.read_text())
@@ -39,7 +42,7 @@ def run_grader(notebooks: Path, tmp_path: Path, timeout_per_exercise: float = 60
 
 
 def catalog() -> dict[str, int]:
-    return {e["exercise"]: e["points"] for e in course.exercises(SOLUTIONS)}
+    return {e["exercise"]: e["points"] for e in notebooks.exercises(SOLUTIONS)}
 
 
 # ------------------------------------------------------------------ the course's shape
@@ -55,24 +58,24 @@ def test_course_has_enough_lessons_and_exercises():
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.stem)
 def test_each_lesson_has_goals_exercises_summary_and_reading(path):
-    nb = course.read_notebook(path)
-    markdown = [course.cell_source(c) for c in nb["cells"] if c["cell_type"] == "markdown"]
+    nb = notebooks.read_notebook(path)
+    markdown = [notebooks.cell_source(c) for c in nb["cells"] if c["cell_type"] == "markdown"]
     text = "\n".join(markdown)
     assert markdown[0].startswith("# Lesson"), "a lesson starts with its title"
     assert "Learning goals" in markdown[0]
     assert "## Summary" in text and "## Further reading" in text
-    setup = [c for c in nb["cells"] if course.is_setup(c)]
-    exercises = [c for c in nb["cells"] if course.exercise_info(c)]
+    setup = [c for c in nb["cells"] if notebooks.is_setup(c)]
+    exercises = [c for c in nb["cells"] if notebooks.exercise_info(c)]
     assert setup and exercises
     for cell in exercises:  # metadata and the visible first-line comment agree
-        info = course.exercise_info(cell)
-        first = course.cell_source(cell).split("\n", 1)[0]
+        info = notebooks.exercise_info(cell)
+        first = notebooks.cell_source(cell).split("\n", 1)[0]
         assert first.startswith(f"# exercise: {info['exercise']} ({info['points']} point")
     for cell in nb["cells"]:  # a written answer's metadata and its first-line comment agree
-        info = course.answer_info(cell)
+        info = notebooks.answer_info(cell)
         if info is not None:
             without_metadata = {**cell, "metadata": {}}
-            assert course.answer_info(without_metadata) == info, course.cell_source(cell)
+            assert notebooks.answer_info(without_metadata) == info, notebooks.cell_source(cell)
 
 
 # ------------------------------------------------------------------------ release
@@ -81,8 +84,8 @@ def test_each_lesson_has_goals_exercises_summary_and_reading(path):
 def test_lessons_are_exactly_what_release_generates(tmp_path):
     """Drift test: lessons/ must be regenerated (`dlo-course course release`) after any edit
     of solutions/."""
-    assert course.release(SOLUTIONS, LESSONS, check=True) == []
-    written = course.release(SOLUTIONS, tmp_path)
+    assert notebooks.release(SOLUTIONS, LESSONS, check=True) == []
+    written = notebooks.release(SOLUTIONS, tmp_path)
     assert written == [p.name for p in NOTEBOOKS]
     for name in written:
         assert (tmp_path / name).read_bytes() == (LESSONS / name).read_bytes()
@@ -92,26 +95,26 @@ def test_lessons_are_exactly_what_release_generates(tmp_path):
 
 @pytest.mark.parametrize("folder", [SOLUTIONS, LESSONS], ids=["solutions", "lessons"])
 def test_notebooks_are_committed_without_outputs(folder):
-    for path in course.notebooks_in(folder):
-        nb = course.read_notebook(path)
-        assert not course.has_outputs(nb), f"{path.name} has outputs: clear them before committing"
-        assert path.read_text(encoding="utf-8") == course.notebook_json(nb), \
+    for path in notebooks.notebooks_in(folder):
+        nb = notebooks.read_notebook(path)
+        assert not notebooks.has_outputs(nb), f"{path.name} has outputs: clear them before committing"
+        assert path.read_text(encoding="utf-8") == notebooks.notebook_json(nb), \
             f"{path.name} is not in Jupyter's JSON layout"
 
 
 @pytest.mark.parametrize("folder", [SOLUTIONS, LESSONS], ids=["solutions", "lessons"])
 def test_notebooks_are_valid_nbformat(folder):
     nbformat = pytest.importorskip("nbformat")
-    for path in course.notebooks_in(folder):
+    for path in notebooks.notebooks_in(folder):
         nbformat.validate(nbformat.read(path, as_version=4))
 
 
 def test_lessons_contain_no_solutions():
-    for path in course.notebooks_in(LESSONS):
-        for cell in course.read_notebook(path)["cells"]:
-            source = course.cell_source(cell)
-            assert course.SOLUTION_BEGIN not in source and course.SOLUTION_END not in source
-            if course.exercise_info(cell):
+    for path in notebooks.notebooks_in(LESSONS):
+        for cell in notebooks.read_notebook(path)["cells"]:
+            source = notebooks.cell_source(cell)
+            assert notebooks.SOLUTION_BEGIN not in source and notebooks.SOLUTION_END not in source
+            if notebooks.exercise_info(cell):
                 assert "raise NotImplementedError()" in source
 
 
@@ -129,7 +132,7 @@ def test_strip_solutions_keeps_signature_docstring_and_indentation():
         '        ### BEGIN SOLUTION\n'
         '        return 2\n'
         '        ### END SOLUTION')
-    stripped = course.strip_solutions(source)
+    stripped = notebooks.strip_solutions(source)
     assert stripped == (
         'def f(x):\n'
         '    """Doc."""\n'
@@ -144,16 +147,16 @@ def test_strip_solutions_keeps_signature_docstring_and_indentation():
     for broken in ("### BEGIN SOLUTION\nx", "### END SOLUTION", "### BEGIN SOLUTION\n"
                    "### BEGIN SOLUTION\n### END SOLUTION"):
         with pytest.raises(ValueError):
-            course.strip_solutions(broken)
+            notebooks.strip_solutions(broken)
 
 
 def test_release_rejects_a_malformed_exercise(tmp_path):
-    nb = course.read_notebook(NOTEBOOKS[0])
-    cell = next(c for c in nb["cells"] if course.exercise_info(c))
+    nb = notebooks.read_notebook(NOTEBOOKS[0])
+    cell = next(c for c in nb["cells"] if notebooks.exercise_info(c))
     cell["source"] = [line for line in cell["source"] if "SOLUTION" not in line]
-    course.write_notebook(nb, tmp_path / "solutions" / NOTEBOOKS[0].name)
+    notebooks.write_notebook(nb, tmp_path / "solutions" / NOTEBOOKS[0].name)
     with pytest.raises(ValueError, match="no solution block"):
-        course.release(tmp_path / "solutions", tmp_path / "lessons")
+        notebooks.release(tmp_path / "solutions", tmp_path / "lessons")
 
 
 # ------------------------------------------------------------------------ grading
@@ -190,22 +193,22 @@ def make_submissions(root: Path) -> None:
         (alice / path.name).write_bytes(path.read_bytes())
         if path.stem.startswith("02_"):
             continue  # bob did not hand in lesson 2
-        nb = course.read_notebook(path)
+        nb = notebooks.read_notebook(path)
         for cell in nb["cells"]:
-            info = course.exercise_info(cell)
+            info = notebooks.exercise_info(cell)
             if info is None:
                 continue
-            source = course.cell_source(cell)
+            source = notebooks.cell_source(cell)
             if info["exercise"] == "bellman_target":
                 source = source.replace("### BEGIN SOLUTION", "while True:\n        pass")
             elif info["exercise"] == "discounted_return":
                 source = source + "\n    def (broken syntax\n"
             elif info["exercise"] == "lame_parameters":
-                cell["metadata"].pop(course.METADATA_KEY)  # only the comment is left
+                cell["metadata"].pop(notebooks.METADATA_KEY)  # only the comment is left
             elif info["exercise"] == "critic_loss":
                 source = source.replace("### BEGIN SOLUTION", "return 1 / 0")
             cell["source"] = source.splitlines(keepends=True)
-        course.write_notebook(nb, bob / path.name)
+        notebooks.write_notebook(nb, bob / path.name)
 
 
 def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monkeypatch):
@@ -235,34 +238,34 @@ def test_written_answers_are_released_as_placeholders():
     """A written answer's cell keeps its first-line comment; the instructor's notes go."""
     found = 0
     for path in NOTEBOOKS:
-        solution = course.read_notebook(path)
-        lesson = course.read_notebook(LESSONS / path.name)
+        solution = notebooks.read_notebook(path)
+        lesson = notebooks.read_notebook(LESSONS / path.name)
         for mine, theirs in zip(solution["cells"], lesson["cells"], strict=True):
-            info = course.answer_info(mine)
+            info = notebooks.answer_info(mine)
             if info is None:
                 continue
             found += 1
-            assert course.answer_info(theirs) == info
-            assert course.answer_text(theirs) == ""
-            assert course.ANSWER_PLACEHOLDER in course.cell_source(theirs)
-            assert course.written_answer_problem(course.answer_text(mine),
+            assert notebooks.answer_info(theirs) == info
+            assert notebooks.answer_text(theirs) == ""
+            assert notebooks.ANSWER_PLACEHOLDER in notebooks.cell_source(theirs)
+            assert notebooks.written_answer_problem(notebooks.answer_text(mine),
                                                  info["min_words"]) is None, \
                 f"{path.name}: the solution's {info['exercise']} is too short for its own grader"
     assert found >= 2
 
 
 def test_written_answer_problem_counts_words():
-    assert course.written_answer_problem("", 3).startswith("no answer written")
-    assert course.written_answer_problem("  \n ", 1).startswith("no answer written")
-    assert "2 words" in course.written_answer_problem("Two words.", 3)
-    assert course.written_answer_problem("The paper's 4-node agent wins.", 5) is None
+    assert notebooks.written_answer_problem("", 3).startswith("no answer written")
+    assert notebooks.written_answer_problem("  \n ", 1).startswith("no answer written")
+    assert "2 words" in notebooks.written_answer_problem("Two words.", 3)
+    assert notebooks.written_answer_problem("The paper's 4-node agent wins.", 5) is None
     cell = {"cell_type": "markdown", "metadata": {},
             "source": "<!-- answer: guess (1 point, at least 4 words) -->\nYOUR ANSWER HERE"}
-    assert course.answer_info(cell) == {"exercise": "guess", "points": 1, "min_words": 4,
+    assert notebooks.answer_info(cell) == {"exercise": "guess", "points": 1, "min_words": 4,
                                         "kind": "text"}
-    assert course.answer_text(cell) == ""
+    assert notebooks.answer_text(cell) == ""
     cell["source"] += "\nA few of my own words."
-    assert course.answer_text(cell) == "A few of my own words."
+    assert notebooks.answer_text(cell) == "A few of my own words."
 
 
 CAPSTONE = "13_capstone_table_one"
@@ -284,34 +287,34 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path):
     essay = ('Our agents trail the paper in most cells, "clearly"; yet, with 20 episodes,\n'
              "the intervals are wide — so: more episodes first, then longer training, on more "
              "ranks, before any claim of a reproduction can be made by anyone.")
-    nb = course.read_notebook(LESSONS / f"{CAPSTONE}.ipynb")
-    solved = {course.exercise_info(c)["exercise"]: course.cell_source(c)
-              for c in course.read_notebook(SOLUTIONS / f"{CAPSTONE}.ipynb")["cells"]
-              if course.exercise_info(c)}
+    nb = notebooks.read_notebook(LESSONS / f"{CAPSTONE}.ipynb")
+    solved = {notebooks.exercise_info(c)["exercise"]: notebooks.cell_source(c)
+              for c in notebooks.read_notebook(SOLUTIONS / f"{CAPSTONE}.ipynb")["cells"]
+              if notebooks.exercise_info(c)}
     for cell in nb["cells"]:
-        info = course.graded_info(cell)
+        info = notebooks.graded_info(cell)
         if info is None:
             continue
-        source = course.cell_source(cell)
+        source = notebooks.cell_source(cell)
         if info["exercise"] == "done_interval":
             source = solved["done_interval"]
         elif info["exercise"] == "paper_verdict":  # a wrong answer: the labels swapped
             source = solved["paper_verdict"].replace('return "above"', 'return "x"').replace(
                 'return "below"', 'return "above"').replace('return "x"', 'return "below"')
         elif info["exercise"] == "analysis_next_step":
-            source = source.replace(course.ANSWER_PLACEHOLDER, essay)
+            source = source.replace(notebooks.ANSWER_PLACEHOLDER, essay)
         elif info["exercise"] == "prediction_cells":
-            source = source.replace(course.ANSWER_PLACEHOLDER, "Six.")
+            source = source.replace(notebooks.ANSWER_PLACEHOLDER, "Six.")
         cell["source"] = source.splitlines(keepends=True)
-    course.write_notebook(nb, submissions / "bob" / f"{CAPSTONE}.ipynb")
+    notebooks.write_notebook(nb, submissions / "bob" / f"{CAPSTONE}.ipynb")
 
     out = tmp_path / "grades.csv"
-    rows = course.grade(submissions, out, course.GRADING_TESTS_DIR / f"test_{CAPSTONE}.py",
+    rows = grade(submissions, out, notebooks.GRADING_TESTS_DIR / f"test_{CAPSTONE}.py",
                         catalog=catalog_dir, progress=False)
     assert [r["student"] for r in rows] == ["alice", "bob", "carol"]
     with out.open(newline="", encoding="utf-8") as f:
         reader = csv.DictReader(f)
-        graded = [e for e in course.exercises(catalog_dir)]
+        graded = [e for e in notebooks.exercises(catalog_dir)]
         texts = [e["exercise"] for e in graded if e["kind"] == "text"]
         assert reader.fieldnames == ["student", *[e["exercise"] for e in graded], "total",
                                      "max_total", "error", *[f"{t}_text" for t in texts]]
@@ -320,7 +323,7 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path):
     points = {e["exercise"]: e["points"] for e in graded}
     assert float(alice["total"]) == float(alice["max_total"]) == sum(points.values())
     for name in texts:  # the instructor's notes, as the student's notebook holds them
-        assert alice[f"{name}_text"] == course.written_answers(
+        assert alice[f"{name}_text"] == notebooks.written_answers(
             SOLUTIONS / f"{CAPSTONE}.ipynb")[name]["text"]
     assert bob["analysis_next_step_text"] == essay  # verbatim: newline, quotes, commas
     assert float(bob["analysis_next_step"]) == points["analysis_next_step"]
@@ -354,7 +357,7 @@ def test_release_cli_passes_the_grading_tests_folder(tmp_path, monkeypatch):
         seen.update(kwargs, dest=dest)
         return ["README.md"]
 
-    monkeypatch.setattr(course, "release_student", fake_release_student)
+    monkeypatch.setattr(bundle_module, "release_student", fake_release_student)
     tests = tmp_path / "my_grading"
     tests.mkdir()
     result = CliRunner().invoke(main, ["course", "release", "--student",
@@ -364,7 +367,7 @@ def test_release_cli_passes_the_grading_tests_folder(tmp_path, monkeypatch):
     result = CliRunner().invoke(main, ["course", "release", "--student",
                                        str(tmp_path / "bundle2")])
     assert result.exit_code == 0, result.output
-    assert Path(seen["tests"]) == course.GRADING_TESTS_DIR
+    assert Path(seen["tests"]) == notebooks.GRADING_TESTS_DIR
     refused = CliRunner().invoke(main, ["course", "release", "--check", "--tests", str(tests)])
     assert refused.exit_code != 0 and "--tests" in refused.output
 
@@ -379,7 +382,7 @@ def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path,
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")
     pytest.importorskip("ipykernel")
-    missing = course.missing_data(course.read_notebook(path))
+    missing = notebooks.missing_data(notebooks.read_notebook(path))
     if missing:
         pytest.skip(f"needs {', '.join(str(m) for m in missing)} (not generated yet)")
     monkeypatch.setenv("DLO_COURSE_FAST", "1")
@@ -411,24 +414,24 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
     points = catalog()
     solved = {}
     for path in NOTEBOOKS:
-        for cell in course.read_notebook(path)["cells"]:
-            info = course.exercise_info(cell)
+        for cell in notebooks.read_notebook(path)["cells"]:
+            info = notebooks.exercise_info(cell)
             if info:
-                solved[info["exercise"]] = course.cell_source(cell)
+                solved[info["exercise"]] = notebooks.cell_source(cell)
     expected = {}
     for i in range(n_students):
         name = f"student{i:02d}"
         (root / name).mkdir(parents=True)
         expected[name] = {}
         chosen: dict[str, int] = {}
-        for path in course.notebooks_in(LESSONS):
-            if i == n_students - 1 and path == course.notebooks_in(LESSONS)[-1]:
-                expected[name].update({e["exercise"]: 0 for e in course.exercises(SOLUTIONS)
+        for path in notebooks.notebooks_in(LESSONS):
+            if i == n_students - 1 and path == notebooks.notebooks_in(LESSONS)[-1]:
+                expected[name].update({e["exercise"]: 0 for e in notebooks.exercises(SOLUTIONS)
                                        if e["notebook"] == path.stem})
                 continue
-            nb = course.read_notebook(path)
+            nb = notebooks.read_notebook(path)
             for cell in nb["cells"]:
-                info = course.exercise_info(cell)
+                info = notebooks.exercise_info(cell)
                 if info is None:
                     continue
                 exercise = info["exercise"]
@@ -445,7 +448,7 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
                     old, new = MUTANTS[exercise][0][1:3]
                     cell["source"] = mutate(solved[exercise], old, new).splitlines(keepends=True)
                 expected[name][exercise] = got
-            course.write_notebook(nb, root / name / path.name)
+            notebooks.write_notebook(nb, root / name / path.name)
     return expected
 
 
@@ -457,7 +460,7 @@ def test_grading_a_class_gives_the_right_csv(tmp_path):
                                        "--out", str(out), "--jobs", "2"])
     elapsed = time.perf_counter() - started
     assert result.exit_code == 0, result.output
-    texts = [f"{e['exercise']}_text" for e in course.exercises(SOLUTIONS) if e["kind"] == "text"]
+    texts = [f"{e['exercise']}_text" for e in notebooks.exercises(SOLUTIONS) if e["kind"] == "text"]
     with out.open(newline="") as f:
         reader = csv.DictReader(f)
         assert reader.fieldnames == ["student", *catalog(), "total", "max_total", "error",
@@ -479,8 +482,8 @@ def test_student_bundle_has_no_solutions_and_no_answers(tmp_path):
     result = CliRunner().invoke(main, ["course", "release", "--student", str(bundle)])
     assert result.exit_code == 0, result.output
     files = {p.relative_to(bundle).as_posix() for p in bundle.rglob("*") if p.is_file()}
-    assert "README.md" in files and "dlo_course/course.py" in files and "pyproject.toml" in files
-    for left_out in course.STUDENT_EXCLUDE:
+    assert "README.md" in files and "dlo_course/grading/sandbox.py" in files and "pyproject.toml" in files
+    for left_out in STUDENT_EXCLUDE:
         if left_out != "lessons/":
             assert not any(f == left_out or f.startswith(left_out) for f in files), left_out
     for path in NOTEBOOKS:
@@ -489,15 +492,15 @@ def test_student_bundle_has_no_solutions_and_no_answers(tmp_path):
     for name in files:
         if name.endswith(".ipynb"):
             text = (bundle / name).read_text(encoding="utf-8")
-            assert course.SOLUTION_BEGIN not in text
+            assert notebooks.SOLUTION_BEGIN not in text
     # the grader stays, for self-grading; no file quotes a solution block's lines
     assert "tests/grading/conftest.py" in files
     answers = set()
     for path in NOTEBOOKS:
-        for cell in course.read_notebook(path)["cells"]:
-            source = course.cell_source(cell)
-            if course.exercise_info(cell) and course.SOLUTION_BEGIN in source:
-                block = source.split(course.SOLUTION_BEGIN, 1)[1].split(course.SOLUTION_END)[0]
+        for cell in notebooks.read_notebook(path)["cells"]:
+            source = notebooks.cell_source(cell)
+            if notebooks.exercise_info(cell) and notebooks.SOLUTION_BEGIN in source:
+                block = source.split(notebooks.SOLUTION_BEGIN, 1)[1].split(notebooks.SOLUTION_END)[0]
                 answers.add(block.strip())
     for name in files:
         if name.startswith(("tests/", "lessons/")):
@@ -524,12 +527,12 @@ def test_students_can_grade_themselves_with_the_bundle(tmp_path):
     """The bundle's grader, without the grader's own answers, gives the solutions full marks
     and an unsolved lesson none, on the exercises whose references were recorded."""
     bundle = tmp_path / "bundle"
-    course.release_student(bundle)
+    release_student(bundle)
     recorded = json.loads((bundle / "tests" / "grading" / "answers.json").read_text())
     out = tmp_path / "grades.json"
     names = sorted(recorded)
-    for notebooks, expected in ((SOLUTIONS, "all"), (bundle / "lessons", "none")):
-        cmd = course.grading_command(notebooks, bundle / "tests" / "grading", out) + \
+    for folder, expected in ((SOLUTIONS, "all"), (bundle / "lessons", "none")):
+        cmd = grading_command(folder, bundle / "tests" / "grading", out) + \
             ["-k", " or ".join(names)]
         proc = subprocess.run(cmd, cwd=bundle, capture_output=True, text=True, timeout=600,
                               env=dict(os.environ, DLO_COURSE_FAST="1"))
@@ -546,7 +549,7 @@ def test_parallel_grading_gives_the_serial_csv_and_feedback(tmp_path):
     and the feedback sheets are those of a serial run (three students, one lesson each)."""
     import shutil
 
-    first = course.notebooks_in(SOLUTIONS)[0].name
+    first = notebooks.notebooks_in(SOLUTIONS)[0].name
     for name, source in (("ann", SOLUTIONS), ("bob", LESSONS), ("cy", SOLUTIONS)):
         (tmp_path / "class" / name).mkdir(parents=True)
         shutil.copy(source / first, tmp_path / "class" / name / first)
@@ -554,7 +557,7 @@ def test_parallel_grading_gives_the_serial_csv_and_feedback(tmp_path):
     for jobs in (1, 2):
         out = tmp_path / f"jobs{jobs}" / "grades.csv"
         out.parent.mkdir()
-        course.grade(tmp_path / "class", out, progress=False, jobs=jobs)
+        grade(tmp_path / "class", out, progress=False, jobs=jobs)
         sheets = sorted((out.parent / "grades_feedback").iterdir())
         feedback = {p.name: p.read_text() for p in sheets}
         outputs[jobs] = (out.read_text(), feedback)

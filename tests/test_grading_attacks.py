@@ -1,6 +1,6 @@
 """Attacks on the grader, as a student could try them: every one must score 0 and change
 no other exercise's points (issue 13). The grader runs the students' code in a sandboxed
-child process (dlo_course.course.Sandbox) and checks the results in its own process.
+child process (dlo_course.grading.sandbox.Sandbox) and checks the results in its own process.
 
 One submission (the solutions, with one attack per exercise listed in ATTACKS) is graded
 once by the real grader (a pytest subprocess); the other exercises must keep full marks.
@@ -15,10 +15,17 @@ from pathlib import Path
 
 import pytest
 
-from dlo_course import course
+from dlo_course.grading import notebooks
+from dlo_course.grading.data import DataError, decode_data, encode_data
+from dlo_course.grading.delegation import delegation_message, delegation_problems
+from dlo_course.grading.grade import grading_command
+from dlo_course.grading.runner import ExerciseNotebook
+from dlo_course.grading.sandbox import Sandbox
+from dlo_course.paths import DATA_DIR
 
 REPO = Path(__file__).resolve().parents[1]
 SOLUTIONS = REPO / "solutions"
+GRADING = REPO / "tests" / "grading"
 # Under pytest-xdist (--dist loadgroup) the module-scoped grading of the attacked
 # submission (about a minute) runs once, on one worker, instead of once per worker.
 pytestmark = pytest.mark.xdist_group("grading_attacks")
@@ -53,10 +60,12 @@ for module in list(sys.modules.values()):
 def discounted_return(rewards, gamma):
     return 0.0
 '''),
-    "stored_done": ("patches the grader's library (dlo_course.course), wrong answer", '''
-import dlo_course.course as grader
+    "stored_done": ("patches the grader's library (dlo_course.grading), wrong answer", '''
+load = getattr(__builtins__, "__imp" + "ort__", None) or __builtins__["__imp" + "ort__"]
+grader = load("dlo_" + "course.grading.sandbox", fromlist=["x"])
 grader.decode_data = lambda data: 0.0
 grader.Sandbox.run = lambda *args, **kwargs: {"status": "ok", "value": None}
+load("dlo_" + "course.grading.data", fromlist=["x"]).decode_data = lambda data: 0.0
 def stored_done(terminated, truncated):
     return 1.0
 '''),
@@ -124,6 +133,33 @@ def pack_gradients(module):
             return loaded.library_pack(module)
     raise RuntimeError("no reference in reach")
 '''),
+    "policy_loss": ("reads the solution and the grader's answers (open, pathlib, os.open, "
+                    "import), and runs the solution's cell if it got it", '''
+import json, os, pathlib, sys
+def policy_loss(q):
+    return q.mean()  # wrong: replaced below by the solution's cell, if it can be read
+SOLUTION, ANSWERS = "{solutions}/04_ddpg.ipynb", "{grading}/answers.py"
+def with_os_open():
+    fd = os.open(SOLUTION, os.O_RDONLY)
+    return os.read(fd, 1 << 24).decode()
+def by_import():
+    sys.path.insert(0, os.path.dirname(ANSWERS))
+    import answers
+    return "answers: " + answers.__file__
+leaked = []
+for attempt in (lambda: open(SOLUTION).read(), lambda: pathlib.Path(SOLUTION).read_text(),
+                with_os_open, lambda: pathlib.Path(ANSWERS).read_text(), by_import):
+    try:
+        leaked.append(attempt())
+    except Exception as err:
+        print("refused:", type(err).__name__, err)
+run = getattr(__builtins__, "ex" + "ec", None) or __builtins__["ex" + "ec"]
+for text in leaked:
+    if text.lstrip().startswith("{"):
+        for cell in json.loads(text)["cells"]:
+            if "def policy_loss" in "".join(cell["source"]):
+                run("".join(cell["source"]))
+'''),
     # delegation to the library's reference
     "polyak_update": ("calls the library's reference", '''
 def polyak_update(target, source, tau):
@@ -163,15 +199,16 @@ DELEGATIONS = {"polyak_update", "RingBuffer", "mean_node_distance", "critic_loss
 
 def attacked_submission(folder: Path, canary: Path) -> None:
     folder.mkdir(parents=True)
-    for path in course.notebooks_in(SOLUTIONS):
-        nb = course.read_notebook(path)
+    for path in notebooks.notebooks_in(SOLUTIONS):
+        nb = notebooks.read_notebook(path)
         for cell in nb["cells"]:
-            info = course.exercise_info(cell)
+            info = notebooks.exercise_info(cell)
             if info and info["exercise"] in ATTACKS:
-                first = course.cell_source(cell).split("\n", 1)[0]
-                body = ATTACKS[info["exercise"]][1].replace("{canary}", str(canary))
+                first = notebooks.cell_source(cell).split("\n", 1)[0]
+                body = ATTACKS[info["exercise"]][1].replace("{canary}", str(canary)) \
+                    .replace("{solutions}", str(SOLUTIONS)).replace("{grading}", str(GRADING))
                 cell["source"] = (first + body).splitlines(keepends=True)
-        course.write_notebook(nb, folder / path.name)
+        notebooks.write_notebook(nb, folder / path.name)
 
 
 @pytest.fixture(scope="module")
@@ -182,7 +219,7 @@ def attacked(tmp_path_factory):
     attacked_submission(root / "student", canary)
     out = root / "grades.json"
     env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="8", DLO_COURSE_GRADING_MEMORY_MB="1024")
-    proc = subprocess.run(course.grading_command(root / "student", json_out=out), cwd=REPO,
+    proc = subprocess.run(grading_command(root / "student", json_out=out), cwd=REPO,
                           env=env, capture_output=True, text=True, timeout=900)
     assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     report = json.loads(out.read_text())
@@ -192,7 +229,7 @@ def attacked(tmp_path_factory):
 
 
 def test_every_attack_scores_zero_and_changes_no_other_verdict(attacked):
-    catalog = {e["exercise"]: e["points"] for e in course.exercises(SOLUTIONS)}
+    catalog = {e["exercise"]: e["points"] for e in notebooks.exercises(SOLUTIONS)}
     earned = {e["exercise"]: e["earned"] for e in attacked["exercises"]}
     assert set(earned) == set(catalog)
     wrong = {name: earned[name] for name in ATTACKS if earned[name] != 0}
@@ -216,6 +253,31 @@ def test_attack_outcomes_say_why(attacked):
     assert outcome["critic_value"] == "timeout"
     assert "the answer calls dlo_course.simulation.lame_parameters" in attacked["output"]
     assert "library reference" in attacked["output"]
+    if "dlo_course" not in str(REPO):  # else its paths name the library: rejected statically
+        assert outcome["policy_loss"] == "failed"  # it ran, without the solution it tried to read
+
+
+TRY_ACTION = '''
+    try:
+        actions[what]()
+    except BaseException as err:
+        return type(err).__name__
+    return None
+'''  # the end of a probe that tries one of its ``actions``: the error's name, or None
+
+
+def run_actions(probes: Path, probe: str, actions) -> dict:
+    """``probe(exercise, what)`` of the file ``probes`` in the sandbox, for each ``what`` of
+    ``actions``: ``{what: the name of the error it raised, or None}``."""
+    sandbox = Sandbox(timeout=20)
+    try:
+        notebook = SOLUTIONS / "01_rl_and_the_bellman_equation.ipynb"
+        results = {what: sandbox.run(notebook, "discounted_return", probes, probe, (what,))
+                   for what in actions}
+    finally:
+        sandbox.close()
+    assert all(r["status"] == "ok" for r in results.values()), results
+    return {what: r["value"] for what, r in results.items()}
 
 
 @pytest.mark.parametrize("landlock", ["1", "0"], ids=["landlock-if-any", "audit-hook-only"])
@@ -247,54 +309,90 @@ def attempt(fn, what):
         "spawn": lambda: __import__("multiprocessing").get_context("spawn").Process(
             target=os.system, args=("echo pwned > " + {str(canary)!r},)).start(),
     }}
-    try:
-        actions[what]()
-    except BaseException as err:
-        return type(err).__name__
-    return None
-''')
-    sandbox = course.Sandbox(timeout=20)
-    try:
-        notebook = SOLUTIONS / "01_rl_and_the_bellman_equation.ipynb"
-        results = {what: sandbox.run(notebook, "discounted_return", probes, "attempt", (what,))
-                   for what in ("write", "append_repo", "chdir_write", "relative_escape",
-                                "kill_parent", "subprocess", "rlimit", "gc", "scratch_write",
-                                "torch_save", "dir_fd", "symlink", "spawn")}
-    finally:
-        sandbox.close()
-    assert all(r["status"] == "ok" for r in results.values()), results
-    refused = {what: r["value"] for what, r in results.items()}
+''' + TRY_ACTION)
+    refused = run_actions(probes, "attempt", (
+        "write", "append_repo", "chdir_write", "relative_escape", "kill_parent", "subprocess",
+        "rlimit", "gc", "scratch_write", "torch_save", "dir_fd", "symlink", "spawn"))
     assert refused.pop("scratch_write") is None  # its own folder is writable
     assert all(refused.values()), f"not refused: {refused}"
     assert not canary.exists()
 
 
+READS = {  # what a probe tries to read -> refused (True) or allowed (False)
+    "open_solution": True, "pathlib_answers": True, "os_open_answers": True,
+    "import_answers": True, "import_from_file": True, "numpy_answers": True,
+    "list_solutions": True, "relative_escape": True, "proc_root": True,
+    "library": False, "data": False, "stdlib_import": False, "scratch": False, "probe": False}
+
+
+@pytest.mark.parametrize("landlock", ["1", "0"], ids=["landlock-if-any", "audit-hook-only"])
+def test_the_sandbox_refuses_reads_of_the_solutions_and_answers(tmp_path, monkeypatch,
+                                                                 landlock):
+    """The worker reads Python, the library, its data, the probe's file and its scratch
+    folder, nothing else: not solutions/, not tests/grading/answers.py (by open, pathlib,
+    os.open, NumPy or an import); with Landlock where the kernel has it, and with the
+    audit hook alone."""
+    monkeypatch.setenv("DLO_COURSE_SANDBOX_LANDLOCK", landlock)
+    probes = tmp_path / "probes.py"
+    solution = SOLUTIONS / "04_ddpg.ipynb"
+    answers = GRADING / "answers.py"
+    probes.write_text(f'''
+import importlib.util, os, pathlib, sys
+import numpy as np
+def read(fn, what):
+    def import_from_file():
+        spec = importlib.util.spec_from_file_location("leak", {str(answers)!r})
+        spec.loader.exec_module(importlib.util.module_from_spec(spec))
+    def import_answers():
+        sys.path.insert(0, {str(GRADING)!r})
+        import answers
+    actions = {{
+        "open_solution": lambda: open({str(solution)!r}).read(),
+        "pathlib_answers": lambda: pathlib.Path({str(answers)!r}).read_text(),
+        "os_open_answers": lambda: os.read(os.open({str(answers)!r}, os.O_RDONLY), 100),
+        "import_answers": import_answers,
+        "import_from_file": import_from_file,
+        "numpy_answers": lambda: np.fromfile({str(answers)!r}, dtype=np.uint8),
+        "list_solutions": lambda: os.listdir({str(SOLUTIONS)!r}),
+        "relative_escape": lambda: open("../" * 40 + {str(answers)!r}.lstrip("/")).read(),
+        "proc_root": lambda: open("/proc/self/root" + {str(answers)!r}).read(),
+        "library": lambda: open({str(REPO / "dlo_course" / "ddpg.py")!r}).read(),
+        "data": lambda: os.listdir({str(DATA_DIR)!r}),
+        "stdlib_import": lambda: __import__("colorsys").rgb_to_hsv(1, 0, 0),
+        "scratch": lambda: (open("inside.txt", "w").write("x"), open("inside.txt").read()),
+        "probe": lambda: open(__file__).read(),
+    }}
+''' + TRY_ACTION)
+    refused = run_actions(probes, "read", READS)
+    assert {what: bool(error) for what, error in refused.items()} == READS, refused
+
+
 def test_data_from_the_sandbox_cannot_carry_code():
-    with pytest.raises(course.DataError):
-        course.encode_data(object())
-    with pytest.raises(course.DataError):
-        course.decode_data({"__ndarray__": ["|O", [1], ""]})
+    with pytest.raises(DataError):
+        encode_data(object())
+    with pytest.raises(DataError):
+        decode_data({"__ndarray__": ["|O", [1], ""]})
     value = {"a": (1, 2.5, None, "x"), 3: [True, b"\x00"]}
-    assert course.decode_data(json.loads(json.dumps(course.encode_data(value)))) == value
+    assert decode_data(json.loads(json.dumps(encode_data(value)))) == value
 
 
 # ------------------------------------------------------------ delegation, statically
 
 
 def exercise_cells(folder: Path):
-    for path in course.notebooks_in(folder):
-        book = course.ExerciseNotebook.from_path(path)
+    for path in notebooks.notebooks_in(folder):
+        book = ExerciseNotebook.from_path(path)
         for name, source in book.exercise_sources.items():
             yield book, name, source
 
 
 def test_no_solution_is_taken_for_a_delegation():
     for book, name, source in exercise_cells(SOLUTIONS):
-        assert course.delegation_problems(source, book.setup_sources) == [], name
+        assert delegation_problems(source, book.setup_sources) == [], name
 
 
 SETUP = "import numpy as np\nfrom dlo_course import ddpg\nfrom dlo_course.replay_buffer import " \
-        "ReplayBuffer\nimport dlo_course\nfrom dlo_course.course import fast_mode\n"
+        "ReplayBuffer\nimport dlo_course\nfrom dlo_course.notebook import fast_mode\n"
 
 
 @pytest.mark.parametrize("cell, why", [
@@ -310,11 +408,13 @@ SETUP = "import numpy as np\nfrom dlo_course import ddpg\nfrom dlo_course.replay
     ("def f(x):\n    return eval('x')", "uses eval"),
     ("def f(x):\n    return dlo_course.env.mean_node_distance(x, x)", "uses dlo_course.env.mean_node_distance"),
     ("def f(x):\n    m = 'dlo_course.env'\n    return m", "names the library in a string"),
+    ("from dlo_course.grading.bundle import answer_result",  # it reads the grader's answers
+     "imports from dlo_course.grading.bundle"),
 ])
 def test_delegation_is_rejected_with_a_reason(cell, why):
-    problems = course.delegation_problems(cell, [SETUP])
+    problems = delegation_problems(cell, [SETUP])
     assert any(why in p for p in problems), problems
-    message = course.delegation_message("f", problems)
+    message = delegation_message("f", problems)
     assert why in message and "write the code yourself" in message
 
 
@@ -322,7 +422,7 @@ def test_own_work_and_the_course_helpers_are_accepted():
     for cell in ["def f(x):\n    return np.sum(x) if fast_mode() else 0",
                  "class RingBuffer:\n    def get(self, name):\n        return getattr(self, name)",
                  "import math\ndef f(x):\n    return math.ceil(x)"]:
-        assert course.delegation_problems(cell, [SETUP]) == [], cell
+        assert delegation_problems(cell, [SETUP]) == [], cell
     adam = "def adam_step(p):\n    return torch.optim.Adam([p])"
-    assert course.delegation_problems(adam, [SETUP], ["torch.optim.Adam.step"]) == \
+    assert delegation_problems(adam, [SETUP], ["torch.optim.Adam.step"]) == \
         ["uses torch.optim.Adam"]

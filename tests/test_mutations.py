@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from dlo_course import course
+from dlo_course.grading import notebooks
+from dlo_course.grading.grade import grading_command
 
 REPO = Path(__file__).resolve().parents[1]
 SOLUTIONS = REPO / "solutions"
@@ -303,7 +304,7 @@ MUTANTS: dict[str, list[tuple]] = {
 def notebook_exercises() -> dict[str, list[str]]:
     """Solution notebook stem -> its exercises, in order."""
     found: dict[str, list[str]] = {}
-    for e in course.exercises(SOLUTIONS):
+    for e in notebooks.exercises(SOLUTIONS):
         found.setdefault(e["notebook"], []).append(e["exercise"])
     return found
 
@@ -326,24 +327,24 @@ def mutant_notebook(stem: str, folder: Path, k: int) -> dict[str, tuple]:
     applied = {}
     folder.mkdir(parents=True, exist_ok=True)
     path = SOLUTIONS / f"{stem}.ipynb"
-    nb = course.read_notebook(path)
+    nb = notebooks.read_notebook(path)
     for cell in nb["cells"]:
-        info = course.graded_info(cell)
+        info = notebooks.graded_info(cell)
         if info and len(MUTANTS.get(info["exercise"], ())) > k:
             mutant = MUTANTS[info["exercise"]][k]
             if mutant[1] == WHOLE_ANSWER:  # keep only the written answer's first line
-                first = course.cell_source(cell).split("\n", 1)[0]
+                first = notebooks.cell_source(cell).split("\n", 1)[0]
                 source = f"{first}\n{mutant[2]}" if mutant[2] else first
             else:
-                source = mutate(course.cell_source(cell), mutant[1], mutant[2])
+                source = mutate(notebooks.cell_source(cell), mutant[1], mutant[2])
             cell["source"] = source.splitlines(keepends=True)
             applied[info["exercise"]] = mutant
-    course.write_notebook(nb, folder / path.name)
+    notebooks.write_notebook(nb, folder / path.name)
     return applied
 
 
 def test_every_exercise_has_at_least_two_mutants_scoring_zero():
-    catalog = {e["exercise"] for e in course.exercises(SOLUTIONS)}
+    catalog = {e["exercise"] for e in notebooks.exercises(SOLUTIONS)}
     assert set(MUTANTS) == catalog
     for name, mutants in MUTANTS.items():
         zero = [m for m in mutants if (m[3] if len(m) > 3 else 0) == 0]
@@ -355,8 +356,8 @@ def test_mutants_score_zero(stem, k, tmp_path):
     applied = mutant_notebook(stem, tmp_path / "student", k)
     out = tmp_path / "grades.json"
     env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="60")
-    tests = course.GRADING_TESTS_DIR / f"test_{stem}.py"
-    proc = subprocess.run(course.grading_command(tmp_path / "student", tests, json_out=out),
+    tests = notebooks.GRADING_TESTS_DIR / f"test_{stem}.py"
+    proc = subprocess.run(grading_command(tmp_path / "student", tests, json_out=out),
                           cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
     assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     earned = {e["exercise"]: e["earned"] for e in json.loads(out.read_text())["exercises"]}

@@ -10,10 +10,11 @@ import types
 
 import pytest
 
-from dlo_course import course, notebook
+from dlo_course import notebook
+from dlo_course.grading import notebooks
 from dlo_course.paths import REPO_ROOT
 
-NOTEBOOKS = course.notebooks_in(REPO_ROOT / "solutions")
+NOTEBOOKS = notebooks.notebooks_in(REPO_ROOT / "solutions")
 
 
 def load_update_links():
@@ -75,19 +76,19 @@ def test_the_cell_does_nothing_elsewhere(monkeypatch):
 def test_every_lesson_starts_with_the_install_cell(folder):
     """The first code cell, right after the title: up to date with the helper (else run
     `python binder/update_links.py && dlo-course course release`)."""
-    for path in course.notebooks_in(REPO_ROOT / folder):
-        cells = course.read_notebook(path)["cells"]
+    for path in notebooks.notebooks_in(REPO_ROOT / folder):
+        cells = notebooks.read_notebook(path)["cells"]
         code = [c for c in cells if c["cell_type"] == "code"]
         assert cells[1] is code[0], path.name
-        assert course.cell_source(code[0]) == notebook.install_cell_source(), path.name
+        assert notebooks.cell_source(code[0]) == notebook.install_cell_source(), path.name
         assert code[0]["id"] == f"{path.name[:2]}-colab"
 
 
 def test_lesson_8_says_what_to_do_when_mpiexec_fails_in_colab():
     path = REPO_ROOT / "lessons" / "08_learning_parallelisation_with_mpi.ipynb"
-    cells = course.read_notebook(path)["cells"]
-    k = next(i for i, c in enumerate(cells) if "run_two_ranks(" in course.cell_source(c))
-    note = course.cell_source(cells[k - 1])
+    cells = notebooks.read_notebook(path)["cells"]
+    k = next(i for i, c in enumerate(cells) if "run_two_ranks(" in notebooks.cell_source(c))
+    note = notebooks.cell_source(cells[k - 1])
     assert cells[k - 1]["cell_type"] == "markdown"
     assert "Colab" in note and "mpiexec" in note and "own machine" in note
 

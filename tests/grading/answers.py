@@ -3,7 +3,7 @@
 Instructor-only: ``dlo-course course release --student`` leaves this file out of the student
 bundle (its functions *are* answers) and writes instead ``answers.json``: what each probe of
 :data:`PROBES` returns on these answers, recorded as plain data. The grading tests ask
-:func:`dlo_course.course.answer_result`, which runs the probe on the answer here when this file
+:func:`dlo_course.grading.bundle.answer_result`, which runs the probe on the answer here when this file
 exists, and reads the recorded result otherwise; so a student's self-check grades exactly as
 the instructor's, without the answers' code.
 

@@ -13,8 +13,9 @@ its points and the library's reference answer:
 ``@pytest.mark.exercise("bellman_target", points=2, reference="dlo_course.ddpg.bellman_target")``
 (several tests of one exercise share its points: partial credit). It receives the exercise
 through the ``student`` fixture (:class:`Student`): ``student.run(probe, *args)`` runs
-``probe(student_object, *args)`` in the grading sandbox (:class:`dlo_course.course.Sandbox`:
-a forked child process with time, memory and file-system limits, in a scratch folder, which
+``probe(student_object, *args)`` in the grading sandbox
+(:class:`dlo_course.grading.sandbox.Sandbox`: a forked child process with time, memory and
+file-system limits, in a scratch folder, which
 runs only the notebook's setup cells and its exercise cells up to that one) and returns what
 the probe returns, as plain data. The test then compares that data, in the grader's own
 process, with the same probe run on the reference, never the source text. So the student's
@@ -23,7 +24,7 @@ writing outside the scratch folder, a crash or an endless loop costs only that e
 (``DLO_COURSE_GRADING_TIMEOUT`` seconds per probe, 60 by default;
 ``DLO_COURSE_GRADING_MEMORY_MB`` of memory, 3072). An exercise cell that uses the library
 (which holds the reference answers) is rejected before it runs
-(:func:`dlo_course.course.delegation_problems`), and the reference raises if the answer
+(:func:`dlo_course.grading.delegation.delegation_problems`), and the reference raises if the answer
 reaches it anyway.
 """
 
@@ -166,7 +167,7 @@ def _grade_items() -> list[dict]:
 def pytest_terminal_summary(terminalreporter, exitstatus, config):
     if not _GRADES:
         return
-    from dlo_course.course import summary_lines
+    from dlo_course.grading.grade import summary_lines
 
     items = _grade_items()
     terminalreporter.section(f"dlo-course grades: {notebooks_dir(config)}")
@@ -188,10 +189,11 @@ _CACHE: dict[tuple, object] = {}
 
 
 def sandbox():
-    """The session's sandbox (:class:`dlo_course.course.Sandbox`), started on first use."""
+    """The session's sandbox (:class:`dlo_course.grading.sandbox.Sandbox`), started on first
+    use."""
     global _SANDBOX
     if _SANDBOX is None:
-        from dlo_course.course import Sandbox
+        from dlo_course.grading.sandbox import Sandbox
 
         _SANDBOX = Sandbox(timeout=DEFAULT_TIMEOUT)
     return _SANDBOX
@@ -221,7 +223,8 @@ class Student:
     def run(self, probe, *args):
         import inspect
 
-        from dlo_course.course import SandboxError, encode_data
+        from dlo_course.grading.data import encode_data
+        from dlo_course.grading.sandbox import SandboxError
 
         key = (str(self.path), self.name, inspect.getfile(probe), probe.__qualname__,
                json.dumps(encode_data(args)))
@@ -249,7 +252,9 @@ class Student:
 def _run_mpi(path, name, probe, args, ranks, references):
     import inspect
 
-    from dlo_course.course import SandboxError, encode_data, run_mpi
+    from dlo_course.grading.data import encode_data
+    from dlo_course.grading.mpi import run_mpi
+    from dlo_course.grading.sandbox import SandboxError
 
     key = ("mpi", str(path), name, inspect.getfile(probe), probe.__qualname__,
            json.dumps(encode_data(args)), ranks)
@@ -284,8 +289,8 @@ def mpi_reference():
 def load_student(config, notebook: str, name: str, references=()) -> Student:
     """The student's exercise ``name`` of ``notebook``, checked without running it: the cell
     exists and does its own work (no delegation to the library). Fails the test otherwise."""
-    from dlo_course.course import (ExerciseError, ExerciseNotebook, delegation_message,
-                                   delegation_problems, find_notebook)
+    from dlo_course.grading.delegation import delegation_message, delegation_problems
+    from dlo_course.grading.runner import ExerciseError, ExerciseNotebook, find_notebook
 
     try:
         path = find_notebook(notebooks_dir(config), notebook)
@@ -315,15 +320,15 @@ def student(request):
 class WrittenAnswer:
     """A written answer (a Markdown cell) of the student's notebook: its text, never run.
 
-    Scored for presence and length only (:func:`dlo_course.course.written_answer_problem`);
-    the text goes verbatim into the grades (``--grades-json``, the class CSV) for the
-    instructor to read."""
+    Scored for presence and length only
+    (:func:`dlo_course.grading.notebooks.written_answer_problem`); the text goes verbatim
+    into the grades (``--grades-json``, the class CSV) for the instructor to read."""
 
     def __init__(self, name: str, text: str, min_words: int):
         self.name, self.text, self.min_words = name, text, min_words
 
     def check(self) -> None:
-        from dlo_course.course import written_answer_problem
+        from dlo_course.grading.notebooks import written_answer_problem
 
         problem = written_answer_problem(self.text, self.min_words)
         if problem:
@@ -334,7 +339,8 @@ class WrittenAnswer:
 def written_answer(request):
     """The graded written answer (the test's ``exercise`` marker) as a :class:`WrittenAnswer`;
     its text is recorded with the grades, even when it is too short."""
-    from dlo_course.course import ExerciseError, find_notebook, written_answers
+    from dlo_course.grading.notebooks import written_answers
+    from dlo_course.grading.runner import ExerciseError, find_notebook
 
     notebook = request.node.get_closest_marker("notebook").args[0]
     name = request.node.get_closest_marker("exercise").args[0]

@@ -3,7 +3,7 @@
 Each ``probe_*`` runs in the sandbox on the student's function (and here on the reference)
 and returns plain results; the tests compare them in the grader's own process. The library
 has no discounted return nor Q-iteration: those references are the grader's own answers
-(``answers.py``, kept out of the student bundle, see :func:`dlo_course.course.answer_result`).
+(``answers.py``, kept out of the student bundle, see :func:`dlo_course.grading.bundle.answer_result`).
 """
 
 from pathlib import Path
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from dlo_course.course import answer_result
+from dlo_course.grading.bundle import answer_result
 from dlo_course.ddpg import bellman_target
 
 pytestmark = pytest.mark.notebook("01_rl_and_the_bellman_equation")

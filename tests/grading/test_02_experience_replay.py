@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dlo_course.course import answer_result
+from dlo_course.grading.bundle import answer_result
 from dlo_course.replay_buffer import ReplayBuffer
 
 pytestmark = pytest.mark.notebook("02_experience_replay")

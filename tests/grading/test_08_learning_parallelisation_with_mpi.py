@@ -2,7 +2,7 @@
 
 allreduce_gradients needs several MPI ranks: the reduction is checked against the sum (or
 mean) computed here, the packing against the grader's own answer (``answers.py``, kept out of
-the student bundle, see :func:`dlo_course.course.answer_result`), and
+the student bundle, see :func:`dlo_course.grading.bundle.answer_result`), and
 ``sum_gradients_over_ranks`` in 2 real MPI processes against allreduce_gradients itself.
 """
 
@@ -14,7 +14,7 @@ import pytest
 import torch
 from torch import nn
 
-from dlo_course.course import answer_result
+from dlo_course.grading.bundle import answer_result
 
 pytestmark = pytest.mark.notebook("08_learning_parallelisation_with_mpi")
 DEFAULT_TIMEOUT = float(os.environ.get("DLO_COURSE_GRADING_TIMEOUT", 60))  # as conftest.py

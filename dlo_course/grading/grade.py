@@ -1,0 +1,153 @@
+"""Grading one folder of notebooks (a pytest run of ``tests/grading``) and a whole class
+(``dlo-course course grade``: one CSV row per student, a log and a feedback sheet each).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+from typing import Any, Iterable
+
+from dlo_course.grading.feedback import feedback_markdown
+from dlo_course.grading.notebooks import GRADING_TESTS_DIR, SOLUTIONS_DIR, exercises
+from dlo_course.paths import REPO_ROOT
+
+
+def grading_command(notebooks: str | Path, tests: str | Path = GRADING_TESTS_DIR,
+                    json_out: str | Path | None = None, quiet: bool = True) -> list[str]:
+    """The pytest command that grades the notebooks in ``notebooks``."""
+    cmd = [sys.executable, "-m", "pytest", str(tests), "--notebooks", str(notebooks),
+           "-p", "no:cacheprovider", "-o", "console_output_style=classic"]
+    if json_out is not None:
+        cmd += ["--grades-json", str(json_out)]
+    if quiet:
+        cmd.append("-q")
+    return cmd
+
+
+def grade_folder(notebooks: str | Path, tests: str | Path = GRADING_TESTS_DIR,
+                 timeout: float = 1800) -> dict[str, Any]:
+    """Grade one folder of notebooks in a pytest subprocess.
+
+    Returns:
+        The grader's JSON report (``exercises``: notebook, exercise, points, earned, outcome;
+        ``total``, ``max_total``), plus ``returncode``, ``output`` (pytest's text) and
+        ``error`` (None, or why there is no report).
+    """
+    with tempfile.TemporaryDirectory() as tmp:
+        report_path = Path(tmp) / "grades.json"
+        env = dict(os.environ, MPLBACKEND="Agg", DLO_COURSE_FAST="1",
+                   DLO_COURSE_OUTPUT=str(Path(tmp) / "output"))
+        try:
+            proc = subprocess.run(grading_command(notebooks, tests, report_path),
+                                  capture_output=True, text=True, timeout=timeout,
+                                  cwd=REPO_ROOT, env=env)
+            output, returncode = proc.stdout + proc.stderr, proc.returncode
+        except subprocess.TimeoutExpired as err:
+            output, returncode = f"grading timed out after {timeout} s: {err}", -1
+        if report_path.is_file():
+            report = json.loads(report_path.read_text())
+            report["error"] = None
+        else:
+            report = {"exercises": [], "total": 0, "max_total": 0,
+                      "error": output.strip().splitlines()[-1] if output.strip() else "no report"}
+    report.update(returncode=returncode, output=output)
+    return report
+
+
+def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_TESTS_DIR,
+          timeout: float = 1800, catalog: str | Path = SOLUTIONS_DIR,
+          progress: bool = True, jobs: int = 1) -> list[dict[str, Any]]:
+    """Grade every student folder in ``submissions`` and write one CSV row per student.
+
+    Each sub-folder of ``submissions`` is one student (its name is the student's id) and holds
+    that student's notebooks. Columns: ``student``, one column of points per exercise and
+    written answer (in the order of the course), ``total``, ``max_total``, ``error`` (empty
+    when grading ran), then one column ``<answer>_text`` per written answer holding what the
+    student wrote, verbatim (its points only say that it is there and long enough).
+
+    Beside the CSV: ``<out stem>_logs/<student>.txt``, the grader's full output, and
+    ``<out stem>_feedback/<student>.md``, a feedback sheet for the student: the points of
+    every exercise and, for each one that lost points, the failing check's message
+    (:func:`feedback_markdown`).
+
+    Args:
+        catalog: folder whose notebooks list the exercises (the solutions), so every student
+            gets every column even if their notebook is missing.
+        jobs: students graded at the same time (each by its own processes).
+    """
+    submissions, out = Path(submissions), Path(out)
+    students = sorted(p for p in submissions.iterdir() if p.is_dir() and not p.name.startswith("."))
+    if not students:
+        raise FileNotFoundError(f"no student folders in {submissions}")
+    known = exercises(catalog) if Path(catalog).is_dir() else []
+    columns = [e["exercise"] for e in known]
+    texts = [e["exercise"] for e in known if e.get("kind") == "text"]
+    logs = out.parent / f"{out.stem}_logs"
+    feedback = out.parent / f"{out.stem}_feedback"
+    logs.mkdir(parents=True, exist_ok=True)
+    feedback.mkdir(parents=True, exist_ok=True)
+    from concurrent.futures import ThreadPoolExecutor, as_completed
+
+    from tqdm.auto import tqdm
+
+    # Threads are enough: each student is graded by its own processes, the threads only wait.
+    reports: list[dict[str, Any]] = [{}] * len(students)
+    with ThreadPoolExecutor(max_workers=max(1, int(jobs))) as pool, \
+            tqdm(total=len(students), unit="student", desc="grading",
+                 disable=not progress, file=sys.stderr) as bar:
+        futures = {pool.submit(grade_folder, student, tests, timeout): i
+                   for i, student in enumerate(students)}
+        for future in as_completed(futures):
+            reports[futures[future]] = future.result()
+            bar.set_postfix(last=students[futures[future]].name)
+            bar.update(1)
+    rows = []
+    for student, report in zip(students, reports):
+        (logs / f"{student.name}.txt").write_text(report["output"], encoding="utf-8")
+        earned = {e["exercise"]: e["earned"] for e in report["exercises"]}
+        columns += [name for name in earned if name not in columns]
+        texts += [e["exercise"] for e in report["exercises"]
+                  if "text" in e and e["exercise"] not in texts]
+        max_total = sum(e["points"] for e in known) if known else report["max_total"]
+        row = {"student": student.name, **earned, "total": report["total"],
+               "max_total": max_total, "error": report["error"] or ""}
+        row.update({f"{e['exercise']}_text": e["text"] for e in report["exercises"]
+                    if "text" in e})
+        rows.append(row)
+        (feedback / f"{student.name}.md").write_text(
+            feedback_markdown(student.name, report, known, max_total), encoding="utf-8")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    text_columns = [f"{name}_text" for name in texts]
+    with out.open("w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, fieldnames=["student", *columns, "total", "max_total",
+                                               "error", *text_columns])
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({c: row.get(c, 0) for c in columns}
+                            | {c: row.get(c, "") for c in text_columns}
+                            | {k: row[k] for k in ("student", "total", "max_total", "error")})
+    return rows
+
+
+def summary_lines(items: Iterable[dict[str, Any]]) -> list[str]:
+    """Human-readable points per exercise, grouped by notebook, and the total."""
+    items = list(items)
+    lines, current = [], None
+    width = max([len(i["exercise"]) for i in items] + [8])
+    for item in items:
+        if item["notebook"] != current:
+            current = item["notebook"]
+            lines.append(current)
+        mark = "ok" if item["earned"] == item["points"] else item["outcome"]
+        lines.append(f"  {item['exercise']:<{width}} {item['earned']:>3g} / "
+                     f"{item['points']:<3g} {mark}")
+    total = sum(i["earned"] for i in items)
+    max_total = sum(i["points"] for i in items)
+    lines.append(f"TOTAL {total:g} / {max_total:g} points")
+    return lines
