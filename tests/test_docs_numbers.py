@@ -1,0 +1,100 @@
+"""The result numbers of README.md and docs/design.md are the committed files' numbers.
+
+Every generated block (``<!-- name:begin -->`` ... ``<!-- name:end -->``) must be exactly what
+:mod:`dlo_course.docs_numbers` renders from the committed report, the paper's table, the
+shipped agents' records and the benchmark results. After a retraining or a new report,
+``python -m dlo_course.docs_numbers`` rewrites them.
+"""
+
+from __future__ import annotations
+
+import csv
+import shutil
+from pathlib import Path
+
+import pytest
+
+from dlo_course import docs_numbers
+from dlo_course.docs_numbers import BLOCKS, DOCS, REPO_ROOT, blocks_in, render
+
+README_BLOCKS = {"table1", "agents"}
+DESIGN_BLOCKS: set[str] = set()  # design.md rewrite pending
+
+
+def _text(name: str) -> str:
+    return (REPO_ROOT / name).read_text()
+
+
+@pytest.mark.parametrize("name", DOCS)
+def test_blocks_match_the_committed_files(name):
+    text = _text(name)
+    blocks = blocks_in(text)
+    assert set(blocks) <= set(BLOCKS), f"{name}: unknown blocks {set(blocks) - set(BLOCKS)}"
+    for block, content in blocks.items():
+        assert content == BLOCKS[block](REPO_ROOT), (
+            f"{name}: the {block!r} block differs from the committed files; run "
+            f"`python -m dlo_course.docs_numbers`")
+    assert render(text) == text
+
+
+def test_each_block_has_its_place():
+    assert set(blocks_in(_text("README.md"))) == README_BLOCKS
+    assert set(blocks_in(_text("docs/design.md"))) == DESIGN_BLOCKS
+    assert "<!-- main-job-time -->" in _text("README.md")
+
+
+def test_table_one_appears_once_in_the_readme():
+    readme = _text("README.md")
+    assert readme.count("<!-- table1:begin -->") == 1
+    # no Table I number outside the generated block: the paper's 4-node small-test 99.8 %
+    outside = readme.replace(blocks_in(readme)["table1"], "")
+    assert "99.8" not in outside and "88.7" not in outside
+
+
+def _copy_sources(tmp_path: Path) -> Path:
+    for rel in ["docs/reproduction", "data/paper", "benchmarks/results", "README.md",
+                "docs/design.md"]:
+        src, dst = REPO_ROOT / rel, tmp_path / rel
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        if src.is_dir():
+            shutil.copytree(src, dst, ignore=shutil.ignore_patterns("runs", "*.png"))
+        else:
+            shutil.copy(src, dst)
+    for d in (REPO_ROOT / "data/checkpoints").glob("nodes*"):
+        (tmp_path / "data/checkpoints" / d.name).mkdir(parents=True)
+        for f in ("record.json", "config.json"):
+            shutil.copy(d / f, tmp_path / "data/checkpoints" / d.name / f)
+    return tmp_path
+
+
+def test_a_changed_number_is_caught(tmp_path):
+    root = _copy_sources(tmp_path)
+    path = root / "docs/reproduction/table1.csv"
+    rows = list(csv.DictReader(path.open()))
+    rows[0]["done_percent"] = "42"
+    with path.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    assert docs_numbers.stale_blocks(root) == ["README.md: table1"]
+
+
+def test_a_changed_shipped_actor_is_caught(tmp_path):
+    root = _copy_sources(tmp_path)
+    path = root / "data/checkpoints/nodes4/record.json"
+    path.write_text(path.read_text().replace('"episode": 240', '"episode": 160'))
+    assert docs_numbers.stale_blocks(root) == ["README.md: agents"]
+
+
+def test_the_paper_numbers_must_agree(tmp_path):
+    root = _copy_sources(tmp_path)
+    path = root / "data/paper/table1.csv"
+    path.write_text(path.read_text().replace("99.8", "99.7"))
+    with pytest.raises(ValueError, match="paper done %"):
+        docs_numbers.table1_markdown(root)
+
+
+def test_default_train_threshold_is_the_tasks():
+    from dlo_course.task import TRAIN_THRESHOLD
+
+    assert docs_numbers.DEFAULT_TRAIN_THRESHOLD == TRAIN_THRESHOLD
