@@ -18,7 +18,7 @@ from dlo_course import docs_numbers
 from dlo_course.docs_numbers import BLOCKS, DOCS, REPO_ROOT, blocks_in, render
 
 README_BLOCKS = {"table1", "agents"}
-DESIGN_BLOCKS: set[str] = set()  # design.md rewrite pending
+DESIGN_BLOCKS = {"ablation", "database", "speed", "reproduction-time"}
 
 
 def _text(name: str) -> str:
