@@ -98,3 +98,16 @@ def test_default_train_threshold_is_the_tasks():
     from dlo_course.task import TRAIN_THRESHOLD
 
     assert docs_numbers.DEFAULT_TRAIN_THRESHOLD == TRAIN_THRESHOLD
+
+
+def test_the_module_map_names_every_module():
+    design = _text("docs/design.md")
+    start = design.index("## Module map")
+    end = design.find("\n## ", start + 1)
+    section = design[start:] if end < 0 else design[start:end]
+    package = REPO_ROOT / "dlo_course"
+    missing = [p.name for p in sorted(package.glob("*.py")) if f"`{p.name}`" not in section]
+    grading = package / "grading"
+    missing += [f"grading/{p.stem}" for p in sorted(grading.glob("*.py"))
+                if p.stem != "__init__" and f"`{p.stem}`" not in section]
+    assert not missing, f"docs/design.md, 'Module map' does not name {missing}"
