@@ -6,6 +6,26 @@ references are the library's, which the bundle ships anyway, except for the few 
 library has no reference for: their answers are the grader's own (``tests/grading/answers.py``,
 left out of the bundle), and :func:`answer_result` reads instead what each answer's probe
 returned at release (``answers.json``, written by :func:`record_answers`).
+
+A recorded result is an expected output for fixed inputs, which an answer could copy (return
+the recorded value when it recognises the probe's inputs), in the bundle and, as the grader's
+``answers.py`` gives the same value, in the instructor's grading too. So an exercise is checked
+without one where that is cheap: ``discounted_return`` on rewards drawn afresh at every
+grading, against the recursion that defines it (the return of no reward is 0, and that of
+``r_k, r_k+1, ...`` is ``r_k`` plus gamma times that of ``r_k+1, ...``, on every suffix),
+which pins it down with no answer in the bundle. The others keep a recorded result, because
+every check that pins them down is their answer, written in the bundle's grader:
+
+* ``stored_done(terminated, truncated)`` has four possible inputs: its four values are the
+  answer, and no fresh input can be drawn;
+* ``q_iteration_sweep``: on fresh inputs, the only exact check recomputes the sweep (the
+  library's ``bellman_target`` on ``max_a' Q(s', a')``), which is the whole exercise; its
+  properties (a done transition gives its reward, gamma = 0 the rewards) leave the greedy
+  maximum over the next state's actions unchecked;
+* ``pack_gradients``: the expected vector of a fresh module is its gradients concatenated in
+  parameter order, zeros for a missing one, which is the answer itself (the library packs
+  only inside ``dlo_course.mpi.allreduce_gradients``, which needs MPI and returns nothing
+  packed).
 """
 
 from __future__ import annotations

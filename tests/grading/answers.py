@@ -16,11 +16,6 @@ import torch
 from dlo_course.ddpg import bellman_target
 
 
-def discounted_return(rewards, gamma):
-    """G_0 = sum_k gamma**k r_k."""
-    return sum(gamma**k * r for k, r in enumerate(rewards))
-
-
 def q_iteration_sweep(q, next_state, reward, done, gamma):
     """(S, A) -> (S, A): eq. (1) with the greedy next action, max_a' Q(s', a')."""
     best_next = torch.as_tensor(q.max(axis=1)[next_state])
@@ -42,7 +37,6 @@ def pack_gradients(module):
 
 # answer -> (grading test file, the probe whose result on the answer the tests compare with)
 PROBES = {
-    "discounted_return": ("test_01_rl_and_the_bellman_equation.py", "probe_discounted_return"),
     "q_iteration_sweep": ("test_01_rl_and_the_bellman_equation.py", "probe_q_iteration_sweep"),
     "stored_done": ("test_02_experience_replay.py", "probe_stored_done"),
     "pack_gradients": ("test_08_learning_parallelisation_with_mpi.py", "probe_pack_gradients"),

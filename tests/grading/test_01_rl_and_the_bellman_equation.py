@@ -2,10 +2,13 @@
 
 Each ``probe_*`` runs in the sandbox on the student's function (and here on the reference)
 and returns plain results; the tests compare them in the grader's own process. The library
-has no discounted return nor Q-iteration: those references are the grader's own answers
-(``answers.py``, kept out of the student bundle, see :func:`dlo_course.grading.bundle.answer_result`).
+has no discounted return nor Q-iteration. The discounted return is checked on rewards drawn
+afresh at every grading, against the recursion that defines it (nothing to copy); the
+Q-iteration sweep against the grader's own answer (``answers.py``, kept out of the student
+bundle, see :func:`dlo_course.grading.bundle.answer_result`).
 """
 
+import random
 from pathlib import Path
 
 import numpy as np
@@ -19,19 +22,34 @@ pytestmark = pytest.mark.notebook("01_rl_and_the_bellman_equation")
 GRADING_DIR = Path(__file__).resolve().parent
 
 
-def probe_discounted_return(fn):
-    rng = np.random.default_rng(1)
-    cases = [(list(rng.normal(size=int(rng.integers(1, 60)))), gamma)
+def discounted_return_cases(seed):
+    """(rewards, gamma) cases: random rewards of random lengths for five discounts."""
+    rng = np.random.default_rng(seed)
+    cases = [(rng.normal(size=int(rng.integers(1, 60))).tolist(), gamma)
              for gamma in (0.0, 0.5, 0.9, 0.99, 1.0)]
-    cases += [([], 0.99), ([-1.0, -1.0, -1.0], 0.5)]
-    return [float(fn(list(rewards), gamma)) for rewards, gamma in cases]
+    return cases + [([-1.0, -1.0, -1.0], 0.5)]
+
+
+def probe_discounted_return(fn, cases):
+    """The return of every suffix of each case's rewards, the empty one last."""
+    return [[float(fn(list(rewards[k:]), gamma)) for k in range(len(rewards) + 1)]
+            for rewards, gamma in cases]
 
 
 @pytest.mark.exercise("discounted_return", points=1, reference="dlo_course.ddpg.bellman_target")
 def test_discounted_return(student):
-    got = student.run(probe_discounted_return)
-    want = answer_result(GRADING_DIR, "discounted_return", probe_discounted_return)
-    assert got == pytest.approx(want, rel=1e-9, abs=1e-12)
+    """G of no reward is 0 and G(r_k, r_k+1, ...) = r_k + gamma G(r_k+1, ...), on every
+    suffix: that pins G down, on rewards drawn now (a recorded output would be copyable)."""
+    cases = discounted_return_cases(random.SystemRandom().randrange(2**32))
+    got = student.run(probe_discounted_return, cases)
+    for returns, (rewards, gamma) in zip(got, cases, strict=True):
+        assert len(returns) == len(rewards) + 1
+        assert returns[-1] == pytest.approx(0.0, abs=1e-12), "the return of no reward is 0"
+        for k, reward in enumerate(rewards):
+            assert returns[k] == pytest.approx(reward + gamma * returns[k + 1], rel=1e-9,
+                                               abs=1e-12), \
+                f"gamma={gamma}, {len(rewards) - k} rewards: G = {returns[k]!r}, but r + " \
+                f"gamma * G(next) = {reward + gamma * returns[k + 1]!r}"
 
 
 def probe_bellman_target(fn):
