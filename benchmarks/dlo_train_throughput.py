@@ -19,11 +19,13 @@ from pathlib import Path
 from dlo_course.rundir import read_progress
 
 
-def run(n_ranks: int, episodes: int, steps: int, out: Path) -> float:
+def run(n_ranks: int, episodes: int, steps: int, out: Path, preset: str = "smoke",
+        extra: tuple[str, ...] = ()) -> float:
+    """Transitions per second of all ranks after the first episode of a short training run."""
     mpiexec = Path(sys.executable).parent / "mpiexec"
     cmd = [str(mpiexec), "-n", str(n_ranks), sys.executable, "-m", "dlo_course.cli", "train",
-           "--preset", "smoke", "--nodes", "4", "--episodes", str(episodes),
-           "--steps-per-episode", str(steps), "--out", str(out), "--no-progress"]
+           "--preset", preset, "--nodes", "4", "--episodes", str(episodes),
+           "--steps-per-episode", str(steps), "--out", str(out), "--no-progress", *extra]
     subprocess.run(cmd, check=True, capture_output=True)
     progress = read_progress(out)
     t, n = progress["wall_time"], progress["transitions"]

@@ -16,7 +16,7 @@ from gymnasium import spaces
 from dlo_course.database import resolve_goals
 from dlo_course.mesh import selected_nodes
 from dlo_course.randomisation import draw_factors, scale_params, validate_ranges
-from dlo_course.simulation import RodScene, SimParams
+from dlo_course.simulation import RodScene, SimParams, sim_params
 from dlo_course.task import DEFAULT_N_NODES, TRAIN_THRESHOLD, ObservationLayout, reached
 
 ENV_ID = "DLOShape-v0"
@@ -141,8 +141,8 @@ class DLOShapeEnv(gym.Env):
         (``SimParams.reset_settle_steps``, ``rebuild_settle_steps``; 0 and 0 give the first
         round's behaviour);
       - edge damping: the rod carries a 1 N·s/m dashpot (and a 1 N/m spring) on every mesh
-        edge, which PyBullet had been adding unasked and the authors' rod had too
-        (``SimParams.edge_damping``; 0 removes them);
+        edge, which PyBullet had been adding unasked (``SimParams.edge_damping``; 0 removes
+        them; ``params=AUTHORS_SETTINGS`` is the authors' code's settings, docs/design.md);
       - the step limit is only ``TimeLimit``'s: the environment no longer takes a
         ``max_episode_steps`` of its own.
     """
@@ -156,7 +156,7 @@ class DLOShapeEnv(gym.Env):
         threshold: float = TRAIN_THRESHOLD,
         render_mode: str | None = None,
         time_mode: str | None = None,
-        params: SimParams | None = None,
+        params: SimParams | dict[str, Any] | None = None,
         randomize: dict[str, Any] | None = None,
     ) -> None:
         super().__init__()
@@ -168,7 +168,8 @@ class DLOShapeEnv(gym.Env):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}")
         self.render_mode = render_mode
-        params = params or SimParams()
+        # A dict of SimParams fields, so that JSON (--env-kwargs, config.json) can set them.
+        params = sim_params(params)
         if time_mode is not None:
             params = params.with_(time_mode=time_mode)
         self.params = params

@@ -108,12 +108,30 @@ class SimParams:
     """Rod self-collision, as in the authors' code."""
     edge_damping: float = 1.0
     """Damping (N s/m) of a dashpot along every mesh edge (PyBullet's mass-spring force, with
-    1 N/m springs). Not in the paper: PyBullet gives a rod these dampers without being asked
-    when the last command before ``loadSoftBody`` was a joint-motor command (it reads that
-    command's gains as spring constants; docs/design.md, "Scene speed"). 1.0 is what every
-    rod of this course had, and the authors' files say theirs had it too: with it our sweep
-    regenerates their small database to 8 mm per node mean, without it to 36 mm. 0 steps
-    about 1.6 times as fast."""
+    1 N/m springs). Not in the authors' code: PyBullet gave every rod of this course these
+    dampers unasked (after a joint-motor command it reads that command's gains as spring
+    constants), and they are kept because, of everything measured, they bring our sweep
+    closest to the authors' database: 8 mm per node mean with them, 36 mm without
+    (docs/design.md, "The scene", where the measurements are). 0 steps about 1.6 times as
+    fast."""
+    anchors: Literal["authors", "nodes"] = "nodes"
+    """How the rod's ends are held. "nodes": node 0 to the world (its mass set to 0) and node 1
+    to the flange, where they are at load time. "authors": node 0 to the plane body and node 1
+    to the flange with the authors' pivots; PyBullet 3.2.7's deformable anchors ignore the
+    pivot, so node 1 is held where it is in both (measured, bit for bit). The two differ only
+    with the rod-plane contact on, which blows up with "nodes" and stays stable with
+    "authors"."""
+    plane_contact: bool = False
+    """Rod-plane contact. On in the authors' code, but here, with "authors" anchors and their
+    mesh or ours, it clamps the bottom ring and moves the sweep 70-190 mm from their database
+    (measured, docs/design.md); off by default."""
+    gripper_contact: bool = False
+    """Contact between the gripper (flange, hand, fingers) and the rod; on in the authors'
+    code. The hand overlaps the rod's top: with "nodes" anchors the contact pushed the top
+    rings 4.7 cm sideways within 75 ms, so it is off by default."""
+    finger_opening: float = 0.0
+    """Distance between the fingers (m), set once at build (no finger motor, as the authors);
+    they open them to 0.08."""
     mesh_path: Path | None = None
     """Legacy VTK mesh. None: ``data/rod.vtk`` for the paper's rod (written on first use if
     missing), or a mesh generated for a non-default ``length`` / ``radius``."""
@@ -171,6 +189,10 @@ class SimParams:
             raise ValueError(f"sub_steps must be >= 1, got {self.sub_steps}")
         if not self.edge_damping >= 0:
             raise ValueError(f"edge_damping must be >= 0, got {self.edge_damping}")
+        if self.anchors not in ("authors", "nodes"):
+            raise ValueError(f"anchors must be 'authors' or 'nodes', got {self.anchors!r}")
+        if not 0.0 <= self.finger_opening <= 0.08:
+            raise ValueError(f"finger_opening must be in [0, 0.08] m, got {self.finger_opening}")
         if self.reset_settle_steps is not None and self.reset_settle_steps < 0:
             raise ValueError(f"reset_settle_steps must be >= 0, got {self.reset_settle_steps}")
         if self.rebuild_settle_steps < 0:
@@ -206,6 +228,31 @@ class SimParams:
         return replace(self, **changes)
 
 
+AUTHORS_SETTINGS: dict = dict(edge_damping=0.0, anchors="authors", plane_contact=True,
+                              gripper_contact=True, finger_opening=0.08)
+"""The authors' code's scene settings, as ``SimParams`` overrides: no edge dampers, node 0
+anchored to the plane body, every contact on, fingers open. About 1.8 times as fast as the
+default, but its sweep lands 90-175 mm (per node mean, x) from the authors' own database with
+our mesh, and 70-140 mm with theirs (docs/design.md, "The scene")."""
+
+
+def sim_params(value: "SimParams | dict | None") -> "SimParams":
+    """A :class:`SimParams` from itself, from a dict of field overrides, or from None (the
+    defaults). Unknown field names are an error that lists the known ones."""
+    if value is None:
+        return SimParams()
+    if isinstance(value, SimParams):
+        return value
+    if isinstance(value, dict):
+        known = set(SimParams.__dataclass_fields__)
+        unknown = sorted(set(value) - known)
+        if unknown:
+            raise ValueError(f"unknown SimParams field(s) {unknown}; known: {sorted(known)}")
+        fields = {k: tuple(v) if isinstance(v, list) else v for k, v in value.items()}
+        return SimParams(**fields)
+    raise TypeError(f"params must be SimParams, a dict of its fields or None, got {type(value)}")
+
+
 @dataclass
 class StepTimings:
     """Wall-clock seconds spent in each part of the actions taken so far (for benchmarks)."""
@@ -232,6 +279,7 @@ class RodScene:
 
     ARM_JOINTS = tuple(range(7))
     GRIPPER_LINKS = (7, 8, 9, 10, 11)  # flange, hand, fingers, grasp frame
+    FINGER_JOINTS = (9, 10)
 
     def __init__(self, params: SimParams | None = None, gui: bool = False) -> None:
         self.params = params or SimParams()
@@ -289,21 +337,39 @@ class RodScene:
                                        rgbaColor=[0.55, 0.45, 0.35, 1.0], physicsClientId=c)
         p.createMultiBody(0.0, -1, pedestal, [prm.panda_base[0], prm.panda_base[1], height / 2],
                           physicsClientId=c)
-        # Node 0 (bottom centre) is fixed to the ground; node 1 (top centre) to the flange.
-        p.createSoftBodyAnchor(self.rod, 0, -1, -1, physicsClientId=c)
-        p.createSoftBodyAnchor(self.rod, 1, self.panda, prm.tip_link, physicsClientId=c)
-        # The anchor is the grasp. The hand and fingers overlap the rod's top; left colliding,
-        # they push its top rings sideways by several centimetres within 0.1 s.
-        for link in self.GRIPPER_LINKS:
-            p.setCollisionFilterPair(self.panda, self.rod, link, -1, 0, physicsClientId=c)
-        # Likewise the anchor is the ground fixation. The bottom ring lies on the plane, and
-        # that contact made the simulation explode on the second move of the database sweep.
-        p.setCollisionFilterPair(self.plane, self.rod, -1, -1, 0, physicsClientId=c)
+        self._anchor_rod()
+        for finger in self.FINGER_JOINTS:  # each finger travels half the opening; no motor
+            p.resetJointState(self.panda, finger, prm.finger_opening / 2, physicsClientId=c)
+        if not prm.gripper_contact:
+            for link in self.GRIPPER_LINKS:
+                p.setCollisionFilterPair(self.panda, self.rod, link, -1, 0, physicsClientId=c)
+        if not prm.plane_contact:
+            p.setCollisionFilterPair(self.plane, self.rod, -1, -1, 0, physicsClientId=c)
 
         # Null-space IK pulls the redundant arm towards its initial posture, so the same tip
         # path always gives the same arm motion instead of drifting through the null space.
         self._ik_limits = nullspace_ik_args(self.panda, prm.initial_joints, c)
         self.timings.reset()
+
+    def _anchor_rod(self) -> None:
+        """Node 0 (bottom centre) to the ground, node 1 (top centre) to the flange.
+
+        "authors" passes the authors' pivots, (tip_x, tip_y, 0) on the plane and
+        (0, 0, -(tip_z - length)) in the flange's frame, but PyBullet 3.2.7's deformable anchors
+        keep each node where it is at load time whatever the pivot (measured: the same rod to
+        the bit with zero pivots), so both end up where "nodes" holds them. What differs is
+        the body: the plane (node 0 keeps its mass, a contact constraint) or the world (node 0
+        gets mass 0, which makes the rod-plane contact blow up).
+        """
+        c, prm, tip = self.client, self.params, self.initial_tip
+        if prm.anchors == "authors":
+            p.createSoftBodyAnchor(self.rod, 0, self.plane, -1, [tip[0], tip[1], 0.0],
+                                   physicsClientId=c)
+            p.createSoftBodyAnchor(self.rod, 1, self.panda, prm.tip_link,
+                                   [0.0, 0.0, -(tip[2] - prm.length)], physicsClientId=c)
+        else:
+            p.createSoftBodyAnchor(self.rod, 0, -1, -1, physicsClientId=c)
+            p.createSoftBodyAnchor(self.rod, 1, self.panda, prm.tip_link, physicsClientId=c)
 
     def close(self) -> None:
         if self.client >= 0:
