@@ -313,14 +313,16 @@ def bench_scene(actions: int = 60, block: int = 10, seed: int = 0, switch_table:
 
 
 def record_trajectory(params: SimParams | None = None, n_actions: int = 60,
-                      seed: int = 12345) -> np.ndarray:
-    """All 200 node positions (n_actions + 1, 200, 3) over seeded random actions in [-1, 1]^3.
+                      seed: int = 12345, moves: np.ndarray | None = None) -> np.ndarray:
+    """All 200 node positions (n_actions + 1, 200, 3) over seeded random actions in [-1, 1]^3
+    (or over ``moves`` (K, 3), given).
 
     Through :class:`RodScene` exactly as ``DLOShapeEnv.step`` drives it (tip target, IK, one
     action of physics), from the freshly built scene: the check that a speed change leaves
     the physics alone.
     """
-    moves = np.random.default_rng(seed).uniform(-1.0, 1.0, size=(n_actions, 3))
+    if moves is None:
+        moves = np.random.default_rng(seed).uniform(-1.0, 1.0, size=(n_actions, 3))
     scene = RodScene(params)
     try:
         trajectory = [scene.node_positions()]

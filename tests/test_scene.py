@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dlo_course.scene_bench import record_trajectory
 from dlo_course.simulation import AUTHORS_SETTINGS, RodScene, SimParams, sim_params
 
 MOVES = np.array([[1.0, -0.5, -0.8], [-0.7, 1.0, 0.3], [0.2, -1.0, -1.0], [-1.0, 0.4, -1.0]])
@@ -13,15 +14,7 @@ MOVES = np.array([[1.0, -0.5, -0.8], [-0.7, 1.0, 0.3], [0.2, -1.0, -1.0], [-1.0,
 
 def trajectory(params: SimParams, moves=MOVES) -> np.ndarray:
     """All node positions (len(moves) + 1, 200, 3) over ``moves``, from a fresh scene."""
-    scene = RodScene(params)
-    try:
-        out = [scene.node_positions()]
-        for a in moves:
-            scene.move_tip_to(scene.tip_target(a))
-            out.append(scene.node_positions())
-        return np.array(out)
-    finally:
-        scene.close()
+    return record_trajectory(params, moves=moves)
 
 
 def test_sim_params_from_a_dict():
