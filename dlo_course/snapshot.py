@@ -33,6 +33,15 @@ def fork_available() -> bool:
     return hasattr(os, "fork") and os.environ.get(NO_FORK_VARIABLE, "0") in ("", "0")
 
 
+def fork_flushed() -> int:
+    """``os.fork()`` after flushing Python's stdout and stderr, so that nothing the parent had
+    buffered is written twice (once by each process). Returns the child's pid, 0 in the
+    child."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    return os.fork()
+
+
 def run_in_fork(fn: Callable[[], Any]) -> Any:
     """``fn()`` run in a forked copy of this process; its (picklable) return value.
 
@@ -45,9 +54,7 @@ def run_in_fork(fn: Callable[[], Any]) -> Any:
     parent). It must not use MPI either: every collective call stays in the parent.
     """
     read_end, write_end = os.pipe()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    pid = os.fork()
+    pid = fork_flushed()
     if pid == 0:  # the child
         status = 0
         try:

@@ -28,6 +28,7 @@ from typing import Any, Iterable
 from dlo_course.grading.data import decode_data, encode_data
 from dlo_course.grading.fence import restrict_worker
 from dlo_course.grading.runner import ExerciseError, ExerciseNotebook
+from dlo_course.snapshot import fork_flushed
 
 SANDBOX_PRELOAD = (
     "numpy", "torch", "torch.nn", "torch.nn.functional", "gymnasium", "matplotlib",
@@ -189,9 +190,7 @@ def sandbox_server() -> None:
         scratch = request["scratch"]
         result_path = os.path.join(os.path.dirname(scratch), os.path.basename(scratch) + ".json")
         log_path = os.path.join(scratch, "output.txt")
-        sys.stdout.flush()
-        sys.stderr.flush()
-        pid = os.fork()
+        pid = fork_flushed()
         if pid == 0:  # the worker
             code = 0
             try:
