@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from dlo_course.task import DEFAULT_N_NODES, NODE_COUNTS
+from dlo_course.task import DEFAULT_N_NODES, NODE_COUNTS, TABLE_THRESHOLDS
 
 REDUCE_OPS = ("sum", "mean")
 """How the agents' gradients can be combined (``TrainConfig.reduce``); the paper sums."""
@@ -298,7 +298,8 @@ _PRESETS = {
     # two levers (stop_at_goal=True, 0.05 m).
     "recipe": Preset("4 nodes, 2 cores, every training lever on; trained the shipped "
                      "2- and 4-node agents",
-                     TrainConfig(env_kwargs={"n_nodes": 4, "threshold": 0.03}, episodes=500,
+                     TrainConfig(env_kwargs={"n_nodes": 4, "threshold": min(TABLE_THRESHOLDS)},
+                                 episodes=500,
                                  steps_per_episode=60,
                                  checkpoint_every=10, out_dir="runs/recipe",
                                  expected_agents=2, updates_per_step=2, her_k=4,
