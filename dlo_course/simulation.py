@@ -231,9 +231,9 @@ class SimParams:
 AUTHORS_SETTINGS: dict = dict(edge_damping=0.0, anchors="authors", plane_contact=True,
                               gripper_contact=True, finger_opening=0.08)
 """The authors' code's scene settings, as ``SimParams`` overrides: no edge dampers, node 0
-anchored to the plane body, every contact on, fingers open. About 1.8 times as fast as the
-default, but its sweep lands 90-175 mm (per node mean, x) from the authors' own database with
-our mesh, and 70-140 mm with theirs (docs/design.md, "The scene")."""
+anchored to the plane body, every contact on, fingers open. About 1.6 times as fast as the
+default in the environment, but its sweep lands 80-160 mm (per node mean, x) from the authors'
+own database with our mesh, and 70-140 mm with theirs (docs/design.md, "The scene")."""
 
 
 def sim_params(value: "SimParams | dict | None") -> "SimParams":
