@@ -79,3 +79,79 @@ def test_adam_step(student):
                                        atol=1e-15)
             np.testing.assert_allclose(step["v"], state["exp_avg_sq"].numpy(), rtol=1e-9,
                                        atol=1e-15)
+
+
+# --------------------------------------------------------------- seeds: bands and intervals
+# The reference is written here (not a recorded output); the inputs are drawn afresh below.
+T_975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306,
+         9: 2.262, 10: 2.228}
+
+
+def reference_interval(values, axis=0):
+    values = np.asarray(values, dtype=np.float64)
+    n = values.shape[axis]
+    mean = values.mean(axis=axis)
+    half = T_975[n - 1] * values.std(axis=axis, ddof=1) / np.sqrt(n)
+    return mean, mean - half, mean + half
+
+
+def seed_samples(seed):
+    rng = np.random.default_rng(seed)
+    return [rng.normal(rng.uniform(-300, 0), rng.uniform(0.1, 80), size=rng.integers(2, 11))
+            for _ in range(12)]
+
+
+def probe_mean_interval(fn, samples):
+    return [[float(x) for x in fn(np.array(s))] for s in samples]
+
+
+@pytest.mark.exercise("mean_interval", points=1)
+def test_mean_interval(student):
+    samples = seed_samples(1101)
+    got = student.run(probe_mean_interval, samples)
+    for s, values in zip(samples, got, strict=True):
+        np.testing.assert_allclose(values, [float(x) for x in reference_interval(s)],
+                                   rtol=1e-9, atol=1e-9, err_msg=f"n = {len(s)}")
+
+
+def probe_mean_curve_with_band(fn, curves):
+    return [[np.asarray(x, dtype=np.float64) for x in fn(np.array(c))] for c in curves]
+
+
+@pytest.mark.exercise("mean_curve_with_band", points=2)
+def test_mean_curve_with_band(student):
+    rng = np.random.default_rng(1102)
+    curves = [rng.normal(0, 50, size=(rng.integers(2, 11), rng.integers(1, 40))).cumsum(axis=1)
+              for _ in range(8)]
+    got = student.run(probe_mean_curve_with_band, curves)
+    for c, (mean, low, high) in zip(curves, got, strict=True):
+        ref = reference_interval(c, axis=0)
+        for name, value, expected in zip(("mean", "low", "high"), (mean, low, high), ref):
+            assert value.shape == expected.shape, f"{name}: shape {value.shape}, not {expected.shape}"
+            np.testing.assert_allclose(value, expected, rtol=1e-9, atol=1e-9,
+                                       err_msg=f"{name}, curves of shape {c.shape}")
+
+
+def probe_recipes_differ(fn, pairs):
+    return [bool(fn(np.array(a), np.array(b))) for a, b in pairs]
+
+
+@pytest.mark.exercise("recipes_differ", points=1)
+def test_recipes_differ(student):
+    rng = np.random.default_rng(1103)
+    pairs = []
+    for gap in (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 20.0) * 3:
+        a = rng.normal(0.0, 1.0, size=rng.integers(2, 11))
+        b = rng.normal(gap, rng.uniform(0.2, 2.0), size=rng.integers(2, 11))
+        pairs.append((a, b) if rng.random() < 0.5 else (b, a))
+    a = np.array([1.0, 2.0, 3.0])
+    pairs.append((a, a + 100.0))
+    pairs.append((a, a + 0.1))
+    got = student.run(probe_recipes_differ, pairs)
+    expected = []
+    for a, b in pairs:
+        _, low_a, high_a = reference_interval(a)
+        _, low_b, high_b = reference_interval(b)
+        expected.append(bool(high_a < low_b or high_b < low_a))
+    assert any(expected) and not all(expected)
+    assert got == expected
