@@ -300,6 +300,22 @@ MUTANTS: dict[str, list[tuple]] = {
     "analysis_next_step": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("empty", WHOLE_ANSWER, "")],
+    "mean_interval": [
+        ("population standard deviation", "float(values.std(ddof=1))", "float(values.std())"),
+        ("normal quantile for t", "T_975[n - 1]", "1.96"),
+        ("divides by n, not sqrt(n)", "/ np.sqrt(n)", "/ n")],
+    "mean_curve_with_band": [
+        ("population standard deviation", "curves.std(axis=0, ddof=1)", "curves.std(axis=0)"),
+        ("t with n degrees of freedom", "T_975[n - 1]", "T_975.get(n, 1.96)"),
+        ("band over the points, not the seeds", "curves.std(axis=0, ddof=1)",
+         "curves.std(ddof=1)")],
+    "recipes_differ": [
+        ("says they differ when the intervals overlap",
+         "return bool(high_a < low_b or high_b < low_a)",
+         "return bool(high_a >= low_b and high_b >= low_a)"),
+        ("normal quantile for t", "T_975[n - 1]", "1.96"),
+        ("one standard deviation, not the interval",
+         "half = T_975[n - 1] * values.std(ddof=1) / np.sqrt(n)", "half = values.std(ddof=1)")],
 }
 def notebook_exercises() -> dict[str, list[str]]:
     """Solution notebook stem -> its exercises, in order."""
