@@ -1,12 +1,16 @@
 """Grading: lesson 11, reproducibility (reference: SimParams.steps_per_action, torch.optim.Adam)."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
 
+from dlo_course.grading.bundle import answer_result
 from dlo_course.simulation import SimParams
 
 pytestmark = pytest.mark.notebook("11_reproducibility")
+GRADING_DIR = Path(__file__).resolve().parent
 
 STEP_CASES = [(mode, duration, step) for mode in ("code", "paper")
               for duration, step in [(0.06, 0.003), (0.06, 0.004), (0.001, 0.003), (0.1, 0.03)]]
@@ -82,18 +86,17 @@ def test_adam_step(student):
 
 
 # --------------------------------------------------------------- seeds: bands and intervals
-# The reference is written here (not a recorded output). Each test draws its inputs twice:
-# from a fixed seed (the same checks at every grading) and afresh (new inputs every time).
-T_975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306,
-         9: 2.262, 10: 2.228}
+# The grader's own answers live in answers.py, which the student bundle leaves out. Inputs from
+# a fixed seed are checked against the answers' results (recorded in the bundle's
+# answers.json); where answers.py is present (the instructor's grading), fresh inputs too.
+ANSWERS = GRADING_DIR / "answers.py"
 
 
-def reference_interval(values, axis=0):
-    values = np.asarray(values, dtype=np.float64)
-    n = values.shape[axis]
-    mean = values.mean(axis=axis)
-    half = T_975[n - 1] * values.std(axis=axis, ddof=1) / np.sqrt(n)
-    return mean, mean - half, mean + half
+def fresh_answer(name, probe):
+    """``probe`` on the grader's own ``name`` (answers.py), or None in a student bundle."""
+    if not ANSWERS.is_file():
+        return None
+    return answer_result(GRADING_DIR, name, probe)
 
 
 def seed_samples(seed):
@@ -102,58 +105,90 @@ def seed_samples(seed):
             for _ in range(12)]
 
 
+def seed_curves(seed):
+    rng = np.random.default_rng(seed)
+    return [rng.normal(0, 50, size=(rng.integers(2, 11), rng.integers(1, 40))).cumsum(axis=1)
+            for _ in range(8)]
+
+
+def seed_pairs(seed):
+    rng = np.random.default_rng(seed)
+    pairs = []
+    for gap in (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 20.0) * 3:
+        a = rng.normal(0.0, 1.0, size=rng.integers(2, 11))
+        b = rng.normal(gap, rng.uniform(0.2, 2.0), size=rng.integers(2, 11))
+        pairs.append((a, b) if rng.random() < 0.5 else (b, a))
+    a = np.array([1.0, 2.0, 3.0])
+    return pairs + [(a, a + 100.0), (a, a + 0.1)]
+
+
 def probe_mean_interval(fn, samples):
     return [[float(x) for x in fn(np.array(s))] for s in samples]
 
 
+def probe_mean_interval_fixed(fn):
+    return probe_mean_interval(fn, seed_samples(1101))
+
+
+def check_intervals(got, want, samples):
+    for s, values, expected in zip(samples, got, want, strict=True):
+        np.testing.assert_allclose(values, expected, rtol=1e-9, atol=1e-9, err_msg=f"n = {len(s)}")
+
+
 @pytest.mark.exercise("mean_interval", points=1)
 def test_mean_interval(student):
-    samples = seed_samples(1101) + seed_samples(None)
-    got = student.run(probe_mean_interval, samples)
-    for s, values in zip(samples, got, strict=True):
-        np.testing.assert_allclose(values, [float(x) for x in reference_interval(s)],
-                                   rtol=1e-9, atol=1e-9, err_msg=f"n = {len(s)}")
+    fixed = seed_samples(1101)
+    check_intervals(student.run(probe_mean_interval, fixed),
+                    answer_result(GRADING_DIR, "mean_interval", probe_mean_interval_fixed), fixed)
+    fresh = seed_samples(None)
+    want = fresh_answer("mean_interval", lambda fn: probe_mean_interval(fn, fresh))
+    if want is not None:
+        check_intervals(student.run(probe_mean_interval, fresh), want, fresh)
 
 
 def probe_mean_curve_with_band(fn, curves):
     return [[np.asarray(x, dtype=np.float64) for x in fn(np.array(c))] for c in curves]
 
 
+def probe_mean_curve_with_band_fixed(fn):
+    return probe_mean_curve_with_band(fn, seed_curves(1102))
+
+
+def check_bands(got, want, curves):
+    for c, bands, expected in zip(curves, got, want, strict=True):
+        for name, value, ref in zip(("mean", "low", "high"), bands, expected, strict=True):
+            value, ref = np.asarray(value), np.asarray(ref)
+            assert value.shape == ref.shape, f"{name}: shape {value.shape}, not {ref.shape}"
+            np.testing.assert_allclose(value, ref, rtol=1e-9, atol=1e-9,
+                                       err_msg=f"{name}, curves of shape {c.shape}")
+
+
 @pytest.mark.exercise("mean_curve_with_band", points=2)
 def test_mean_curve_with_band(student):
-    curves = []
-    for rng in (np.random.default_rng(1102), np.random.default_rng()):
-        curves += [rng.normal(0, 50, size=(rng.integers(2, 11), rng.integers(1, 40))).cumsum(axis=1)
-                   for _ in range(8)]
-    got = student.run(probe_mean_curve_with_band, curves)
-    for c, (mean, low, high) in zip(curves, got, strict=True):
-        ref = reference_interval(c, axis=0)
-        for name, value, expected in zip(("mean", "low", "high"), (mean, low, high), ref):
-            assert value.shape == expected.shape, f"{name}: shape {value.shape}, not {expected.shape}"
-            np.testing.assert_allclose(value, expected, rtol=1e-9, atol=1e-9,
-                                       err_msg=f"{name}, curves of shape {c.shape}")
+    fixed = seed_curves(1102)
+    check_bands(student.run(probe_mean_curve_with_band, fixed),
+                answer_result(GRADING_DIR, "mean_curve_with_band", probe_mean_curve_with_band_fixed),
+                fixed)
+    fresh = seed_curves(None)
+    want = fresh_answer("mean_curve_with_band", lambda fn: probe_mean_curve_with_band(fn, fresh))
+    if want is not None:
+        check_bands(student.run(probe_mean_curve_with_band, fresh), want, fresh)
 
 
 def probe_recipes_differ(fn, pairs):
     return [bool(fn(np.array(a), np.array(b))) for a, b in pairs]
 
 
+def probe_recipes_differ_fixed(fn):
+    return probe_recipes_differ(fn, seed_pairs(1103))
+
+
 @pytest.mark.exercise("recipes_differ", points=1)
 def test_recipes_differ(student):
-    pairs = []
-    for rng in (np.random.default_rng(1103), np.random.default_rng()):
-        for gap in (0.0, 0.5, 1.0, 2.0, 4.0, 8.0, 20.0) * 3:
-            a = rng.normal(0.0, 1.0, size=rng.integers(2, 11))
-            b = rng.normal(gap, rng.uniform(0.2, 2.0), size=rng.integers(2, 11))
-            pairs.append((a, b) if rng.random() < 0.5 else (b, a))
-    a = np.array([1.0, 2.0, 3.0])
-    pairs.append((a, a + 100.0))
-    pairs.append((a, a + 0.1))
-    got = student.run(probe_recipes_differ, pairs)
-    expected = []
-    for a, b in pairs:
-        _, low_a, high_a = reference_interval(a)
-        _, low_b, high_b = reference_interval(b)
-        expected.append(bool(high_a < low_b or high_b < low_a))
-    assert any(expected) and not all(expected)
-    assert got == expected
+    want = answer_result(GRADING_DIR, "recipes_differ", probe_recipes_differ_fixed)
+    assert any(want) and not all(want)
+    assert student.run(probe_recipes_differ, seed_pairs(1103)) == list(want)
+    fresh = seed_pairs(None)
+    want = fresh_answer("recipes_differ", lambda fn: probe_recipes_differ(fn, fresh))
+    if want is not None:
+        assert student.run(probe_recipes_differ, fresh) == want
