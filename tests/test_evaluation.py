@@ -291,3 +291,19 @@ def test_cli_scores_several_thresholds(tmp_path, checkpoint, goals_2):
     data = json.loads(out.read_text())
     assert [d["threshold"] for d in data] == [0.05, 0.03]
     assert all(d["summary"]["episodes"] == 3 for d in data)
+
+
+def test_seed_interval_matches_the_t_formula():
+    from dlo_course.evaluation import seed_interval
+
+    # Three seeds: mean 90, sample std 10, t(2) = 4.303: half-width 4.303 * 10 / sqrt(3).
+    mean, low, high = seed_interval([80.0, 90.0, 100.0])
+    assert mean == pytest.approx(90.0)
+    assert high - mean == pytest.approx(4.303 * 10.0 / np.sqrt(3.0))
+    assert mean - low == pytest.approx(high - mean)
+    # Per point of a curve: the axis of seeds is reduced, the points are kept.
+    curves = np.array([[0.0, 1.0], [2.0, 1.0]])
+    m, lo, hi = seed_interval(curves, axis=0)
+    assert m.tolist() == [1.0, 1.0] and lo[1] == hi[1] == 1.0 and lo[0] < 0 < 2 < hi[0]
+    with pytest.raises(ValueError, match="2 to"):
+        seed_interval([1.0])

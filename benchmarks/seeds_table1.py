@@ -1,0 +1,152 @@
+"""Benchmark (not a test): how much of Table I is luck. One configuration, several training seeds.
+
+Each shipped agent is one training seed. This script evaluates several agents trained with the
+same configuration and different ``--seed`` on Table I's cells *with reinitialisation* (both
+databases' test goals, 0.05 m and 0.03 m; the cells without reinitialisation are left out: on the
+paper's test goals they took 49.6 minutes of 2 ranks against 26.8 for the cells with, for the
+three node counts, benchmarks/results/reproduction_time.txt), then reports per cell:
+
+* per seed: done % over the episodes with its Wilson interval (the episodes' luck);
+* over seeds: the mean done % and its 95% t-interval (the training's luck,
+  :func:`dlo_course.evaluation.seed_interval`), beside the paper's number.
+
+    mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 6 \\
+        --agent 0=data/checkpoints/nodes6 --agent 1=runs/recipe_n6_s1 --agent 2=runs/recipe_n6_s2
+    python benchmarks/seeds_table1.py report --nodes 6
+
+Each agent's evaluation is cached in ``benchmarks/results/seeds/cache`` under its actor's
+digest (the cache of ``dlo-course reproduce``), so a stopped run resumes at the agent it was in
+and a report can be rebuilt on any machine. ``report`` writes
+``benchmarks/results/seeds/nodesN.md`` and ``.csv`` from the cached evaluations.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import sys
+from pathlib import Path
+
+from dlo_course import mpi
+from dlo_course.evaluation import seed_interval
+from dlo_course.reproduce import Cell, evaluate_cells, read_paper_table
+from dlo_course.rundir import agent_dir, run_record
+from dlo_course.task import TABLE_THRESHOLDS
+
+RESULTS = Path(__file__).parent / "results" / "seeds"
+CACHE = RESULTS / "cache"
+EPISODES, MAX_STEPS, GOAL_SEED = 100, 30, 0  # the protocol of docs/reproduction/table1.csv
+
+
+def cells(nodes: int) -> list[Cell]:
+    return [Cell("with", nodes, db, t) for db in ("small", "large") for t in TABLE_THRESHOLDS]
+
+
+def _layout(seed: int, folder: Path, nodes: int) -> Path:
+    # evaluate_cells reads agents from ROOT/nodesN: give each seed's agent such a root.
+    root = RESULTS / "layout" / f"seed{seed}"
+    link = agent_dir(root, nodes)
+    if mpi.is_root():
+        link.parent.mkdir(parents=True, exist_ok=True)
+        if link.is_symlink() or link.exists():
+            link.unlink()
+        link.symlink_to(Path(folder).resolve(), target_is_directory=True)
+    mpi.barrier()
+    return root
+
+
+def run(nodes: int, agents: dict[int, Path]) -> None:
+    manifest = {}
+    for seed, folder in sorted(agents.items()):
+        if not (Path(folder) / "actor.pt").is_file():
+            raise FileNotFoundError(f"seed {seed}: no actor.pt in {folder}")
+        rows = evaluate_cells(_layout(seed, folder, nodes), EPISODES, MAX_STEPS, GOAL_SEED,
+                              cells=cells(nodes), protocol="test", cache=CACHE)
+        if mpi.is_root():
+            record = run_record(folder)
+            manifest[str(seed)] = {"agent": str(folder), "transitions": record.get("transitions"),
+                                   "episodes_per_agent": record.get("episodes_per_agent"),
+                                   "wall_time_h": record.get("wall_time_h"),
+                                   "rows": [{**r, "cell": r["cell"].key} for r in rows]}
+    if mpi.is_root():
+        RESULTS.mkdir(parents=True, exist_ok=True)
+        (RESULTS / f"nodes{nodes}_runs.json").write_text(json.dumps(manifest, indent=1) + "\n")
+        report(nodes)
+
+
+def report(nodes: int) -> str:
+    manifest = json.loads((RESULTS / f"nodes{nodes}_runs.json").read_text())
+    paper = read_paper_table()
+    seeds = sorted(manifest, key=int)
+    lines = [f"# Table I over training seeds: {nodes} nodes, with reinitialisation",
+             "",
+             f"{EPISODES} test episodes per cell and seed (goal draw seed {GOAL_SEED}, at most "
+             f"{MAX_STEPS} actions), made by `mpiexec -n 2 python benchmarks/seeds_table1.py run "
+             f"--nodes {nodes} ...` (the module docstring). Per seed: done % [95% Wilson interval "
+             f"over the episodes]. Over seeds: mean [95% t-interval over the {len(seeds)} seeds].",
+             "",
+             "| database | threshold | " + " | ".join(f"seed {s}" for s in seeds)
+             + " | mean over seeds | paper | paper vs seeds |",
+             "|---|---|" + "---|" * len(seeds) + "---|---|---|"]
+    table = []
+    for cell in cells(nodes):
+        per_seed = []
+        for s in seeds:
+            row = next(r for r in manifest[s]["rows"] if tuple(r["cell"]) == cell.key)
+            per_seed.append(row)
+        done = [r["done_percent"] for r in per_seed]
+        mean, low, high = seed_interval(done)
+        paper_done = paper[cell.key]["done_percent"]
+        where = "above" if paper_done > high else "below" if paper_done < low else "within"
+        lines.append(f"| {cell.database} | {cell.threshold:g} | "
+                     + " | ".join(f"{r['done_percent']:.0f} [{r['done_ci_low']:.0f}, "
+                                  f"{r['done_ci_high']:.0f}]" for r in per_seed)
+                     + f" | {mean:.1f} [{max(low, 0):.1f}, {min(high, 100):.1f}] | {paper_done:g}"
+                     f" | {where} |")
+        table.append({"nodes": nodes, "database": cell.database, "threshold": cell.threshold,
+                      **{f"seed{s}_done_percent": r["done_percent"] for s, r in zip(seeds, per_seed)},
+                      "mean_done_percent": mean, "seed_ci_low": low, "seed_ci_high": high,
+                      "paper_done_percent": paper_done, "paper_vs_seeds": where})
+    lines += ["", "The agents:", ""]
+    for s in seeds:
+        m = manifest[s]
+        hours = m.get("wall_time_h")
+        lines.append(f"- seed {s}: `{m['agent']}`, {m.get('transitions')} transitions, "
+                     f"{m.get('episodes_per_agent')} episodes per agent"
+                     + (f", {hours:.2f} h of training" if hours else ""))
+    text = "\n".join(lines) + "\n"
+    (RESULTS / f"nodes{nodes}.md").write_text(text)
+    with open(RESULTS / f"nodes{nodes}.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(table[0]))
+        writer.writeheader()
+        writer.writerows(table)
+    print(text)
+    return text
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("command", choices=("run", "report"))
+    parser.add_argument("--nodes", type=int, required=True, choices=(2, 4, 6))
+    parser.add_argument("--agent", action="append", default=[], metavar="SEED=FOLDER",
+                        help="a trained agent (run directory or agent folder) and its seed")
+    args = parser.parse_args(argv)
+    if args.command == "report":
+        report(args.nodes)
+        return
+    agents = {}
+    for item in args.agent:
+        seed, _, folder = item.partition("=")
+        if not folder or not seed.isdigit():
+            parser.error(f"--agent wants SEED=FOLDER, got {item!r}")
+        agents[int(seed)] = Path(folder)
+    if len(agents) < 2:
+        parser.error("give at least two --agent SEED=FOLDER: an interval over seeds needs two")
+    run(args.nodes, agents)
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("MPLBACKEND", "Agg")
+    main(sys.argv[1:])
