@@ -17,9 +17,20 @@ Conventions (nbgrader's, kept deliberately small):
   {"answer": NAME, "points": N, "min_words": W}`` and starts with the comment
   ``<!-- answer: NAME (N points, at least W words) -->`` (the fallback, as for exercises).
   The solution's cell holds notes for the instructor; releasing keeps only the comment and
-  :data:`ANSWER_PLACEHOLDER`. It is scored for presence and length only
-  (:func:`written_answer_problem`) and recorded verbatim in the class CSV, for the
-  instructor to read.
+  :data:`ANSWER_PLACEHOLDER`. It is recorded verbatim in the class CSV, for the instructor
+  to read, and gets no points if it is missing or shorter than W words
+  (:func:`written_answer_problem`).
+* A written answer may carry a **rubric**: ``"rubric": [{"criterion": "<one line the
+  instructor and the student read>", "patterns": ["<case-insensitive Python regex>", ...]},
+  ...]`` in the same metadata. A criterion is met when any of its patterns matches the answer
+  (``re.search``, ignoring case); a long enough answer then earns points x (criteria met /
+  criteria) (:func:`written_answer_score`), and without a rubric all its points. Criteria
+  should reward substance, not keywords: "commits to a number" (``\\d``), "gives a reason"
+  (``\\bbecause\\b|\\bsince\\b``). Releasing keeps the rubric in the lesson's cell and lists the
+  criteria under the placeholder (:data:`RUBRIC_PREFIX` ``(1) ...; (2) ...``), so the student
+  sees what a good answer covers; the solution's notes should still say what it contains.
+  A malformed rubric fails the release and the grading (:func:`check_rubric`);
+  ``dlo-course course rubrics`` prints every rubric for the instructor.
 * **Setup** cells (tag ``setup`` in ``cell.metadata["tags"]``) hold what the exercises need
   (imports, constants). The grader runs only the setup cells and the exercise cells, in a fresh
   namespace, so it never waits for a simulation or a training run of the notebook.
@@ -55,6 +66,7 @@ GRADING_TESTS_DIR = REPO_ROOT / "tests" / "grading"
 _EXERCISE_COMMENT = re.compile(r"^\s*#\s*exercise:\s*([A-Za-z_]\w*)\s*\((\d+)\s*points?\)",
                                re.IGNORECASE)
 ANSWER_PLACEHOLDER = "YOUR ANSWER HERE"
+RUBRIC_PREFIX = "*Checked for:*"  # the line of a lesson's written answer that lists its criteria
 _ANSWER_COMMENT = re.compile(r"^\s*<!--\s*answer:\s*([A-Za-z_]\w*)\s*\((\d+)\s*points?"
                              r"(?:\s*,\s*at least\s*(\d+)\s*words?)?\s*\)\s*-->", re.IGNORECASE)
 
@@ -107,16 +119,55 @@ def exercise_info(cell: dict[str, Any]) -> dict[str, Any] | None:
     return None
 
 
+def check_rubric(rubric: Any, answer: str) -> list[dict[str, Any]]:
+    """A written answer's rubric, checked: a non-empty list of ``{"criterion": text,
+    "patterns": [regex, ...]}``, each criterion a non-empty line, each pattern a regex that
+    compiles and cannot match every text. Raises ValueError naming ``answer`` otherwise."""
+    where = f"written answer {answer!r}: rubric"
+    if not isinstance(rubric, list) or not rubric:
+        raise ValueError(f"{where} must be a non-empty list of {{\"criterion\": ..., "
+                         f"\"patterns\": [...]}} (got {rubric!r}); leave the key out for none")
+    checked = []
+    for number, item in enumerate(rubric, start=1):
+        if not isinstance(item, dict) or set(item) != {"criterion", "patterns"}:
+            keys = sorted(item) if isinstance(item, dict) else type(item).__name__
+            raise ValueError(f"{where} criterion {number} must have exactly the keys "
+                             f"'criterion' and 'patterns' (got {keys})")
+        criterion, patterns = item["criterion"], item["patterns"]
+        if not isinstance(criterion, str) or not criterion.strip() or "\n" in criterion.strip():
+            raise ValueError(f"{where} criterion {number}: 'criterion' must be one line of text "
+                             f"(got {criterion!r})")
+        if not isinstance(patterns, list) or not patterns \
+                or not all(isinstance(p, str) and p for p in patterns):
+            raise ValueError(f"{where} criterion {number} ({criterion!r}): 'patterns' must be a "
+                             f"non-empty list of regular expressions (got {patterns!r})")
+        for pattern in patterns:
+            try:
+                compiled = re.compile(pattern, re.IGNORECASE)
+            except re.error as err:
+                raise ValueError(f"{where} criterion {number} ({criterion!r}): pattern "
+                                 f"{pattern!r} is not a valid regular expression: {err}") from None
+            if compiled.search(""):
+                raise ValueError(f"{where} criterion {number} ({criterion!r}): pattern "
+                                 f"{pattern!r} matches the empty text, so any answer meets it")
+        checked.append({"criterion": criterion.strip(), "patterns": list(patterns)})
+    return checked
+
+
 def answer_info(cell: dict[str, Any]) -> dict[str, Any] | None:
     """``{"exercise": name, "points": n, "min_words": w, "kind": "text"}`` if ``cell`` is a
-    written-answer cell (Markdown), else None. The metadata wins; the first-line comment
+    written-answer cell (Markdown), else None; plus ``"rubric"`` (:func:`check_rubric`) if the
+    metadata has one. The metadata wins; the first-line comment
     ``<!-- answer: NAME (N points, at least W words) -->`` is the fallback."""
     if cell.get("cell_type") != "markdown":
         return None
     meta = cell.get("metadata", {}).get(METADATA_KEY) or {}
     if "answer" in meta:
-        return {"exercise": str(meta["answer"]), "points": int(meta.get("points", 1)),
+        info = {"exercise": str(meta["answer"]), "points": int(meta.get("points", 1)),
                 "min_words": int(meta.get("min_words", 1)), "kind": "text"}
+        if "rubric" in meta:
+            info["rubric"] = check_rubric(meta["rubric"], info["exercise"])
+        return info
     first = cell_source(cell).lstrip("\n").split("\n", 1)[0]
     match = _ANSWER_COMMENT.match(first)
     if match:
@@ -136,21 +187,31 @@ def graded_info(cell: dict[str, Any]) -> dict[str, Any] | None:
 
 def answer_text(cell: dict[str, Any]) -> str:
     """What the student wrote in a written-answer cell: the cell without its first-line
-    comment and without the placeholder, stripped."""
+    comment, the placeholder and the released list of criteria (:data:`RUBRIC_PREFIX`),
+    stripped."""
     lines = cell_source(cell).strip("\n").split("\n")
     if lines and _ANSWER_COMMENT.match(lines[0]):
         lines = lines[1:]
+    lines = [line for line in lines if not line.strip().startswith(RUBRIC_PREFIX)]
     return "\n".join(lines).replace(ANSWER_PLACEHOLDER, "").strip()
+
+
+def _answer_info_in(cell: dict[str, Any], where: str) -> dict[str, Any] | None:
+    try:
+        return answer_info(cell)
+    except ValueError as err:
+        raise ValueError(f"{where}: {err}") from None
 
 
 def written_answers(path: str | Path) -> dict[str, dict[str, Any]]:
     """The written answers of a notebook: name -> :func:`answer_info` plus ``"text"``
-    (:func:`answer_text`). The last cell of a name wins, as for exercises."""
+    (:func:`answer_text`) and ``"rubric"`` (``[]`` if it has none). The last cell of a name
+    wins, as for exercises. A malformed rubric raises ValueError naming the notebook."""
     found: dict[str, dict[str, Any]] = {}
     for cell in read_notebook(path)["cells"]:
-        info = answer_info(cell)
+        info = _answer_info_in(cell, Path(path).name)
         if info is not None:
-            found[info["exercise"]] = {**info, "text": answer_text(cell)}
+            found[info["exercise"]] = {"rubric": [], **info, "text": answer_text(cell)}
     return found
 
 
@@ -159,8 +220,8 @@ def count_words(text: str) -> int:
 
 
 def written_answer_problem(text: str, min_words: int) -> str | None:
-    """Why a written answer gets no points (None: full points). Only its presence and length
-    count here; what it says is for the instructor, who reads it in the class CSV."""
+    """Why a written answer gets no points (None: it is there and long enough, and its rubric,
+    if any, decides: :func:`written_answer_score`)."""
     words = count_words(text)
     if words == 0:
         return f"no answer written: replace {ANSWER_PLACEHOLDER!r} with your own words"
@@ -168,6 +229,52 @@ def written_answer_problem(text: str, min_words: int) -> str | None:
         return (f"{words} word{'s' if words != 1 else ''}: this answer needs at least "
                 f"{min_words} words")
     return None
+
+
+def rubric_met(text: str, rubric: list[dict[str, Any]]) -> list[bool]:
+    """For each criterion of ``rubric``: does any of its patterns occur in ``text``
+    (``re.search``, ignoring case)?"""
+    return [any(re.search(p, text, re.IGNORECASE) for p in item["patterns"]) for item in rubric]
+
+
+def written_answer_score(text: str, min_words: int,
+                         rubric: list[dict[str, Any]] | None = None) -> float:
+    """The share of its points a written answer earns, in [0, 1]: 0 if it is missing or too
+    short (:func:`written_answer_problem`), else the share of the rubric's criteria it meets
+    (1 without a rubric)."""
+    if written_answer_problem(text, min_words) is not None:
+        return 0.0
+    if not rubric:
+        return 1.0
+    met = rubric_met(text, rubric)
+    return sum(met) / len(met)
+
+
+def rubric_line(rubric: list[dict[str, Any]]) -> str:
+    """The criteria as a lesson shows them under the placeholder:
+    ``*Checked for:* (1) ...; (2) ...``."""
+    return f"{RUBRIC_PREFIX} " + "; ".join(f"({number}) {item['criterion']}"
+                                           for number, item in enumerate(rubric, start=1))
+
+
+def rubrics_markdown(folder: str | Path = SOLUTIONS_DIR) -> str:
+    """Every written answer of the notebooks in ``folder`` with its points, minimum length
+    and rubric (criteria and patterns), as Markdown for the instructor."""
+    lines = [f"# Written answers and their rubrics ({Path(folder).name}/)", ""]
+    for path in notebooks_in(folder):
+        answers = written_answers(path)
+        if not answers:
+            continue
+        lines += [f"## {path.stem}", ""]
+        for name, info in answers.items():
+            points = f"{info['points']} point{'s' if info['points'] != 1 else ''}"
+            lines.append(f"- `{name}`: {points}, at least {info['min_words']} words"
+                         + ("" if info["rubric"] else "; no rubric: all points if long enough"))
+            for number, item in enumerate(info["rubric"], start=1):
+                patterns = ", ".join(f"`{p}`" for p in item["patterns"])
+                lines.append(f"  {number}. {item['criterion']} (any of: {patterns})")
+        lines.append("")
+    return "\n".join(lines).rstrip() + "\n"
 
 
 def is_setup(cell: dict[str, Any]) -> bool:
@@ -234,17 +341,19 @@ def release_notebook(nb: dict[str, Any], name: str = "notebook") -> dict[str, An
     """The student version of a solution notebook (outputs cleared, solutions removed)."""
     nb = clear_outputs(nb)
     for index, cell in enumerate(nb["cells"]):
-        written = answer_info(cell)
+        where = f"{name}, cell {index}"
+        written = _answer_info_in(cell, where)
         if written is not None:  # the instructor's notes give way to the placeholder
+            criteria = f"\n\n{rubric_line(written['rubric'])}" if written.get("rubric") else ""
             _set_source(cell, f"<!-- answer: {written['exercise']} ({written['points']} "
                               f"point{'s' if written['points'] != 1 else ''}, at least "
-                              f"{written['min_words']} words) -->\n{ANSWER_PLACEHOLDER}")
+                              f"{written['min_words']} words) -->\n{ANSWER_PLACEHOLDER}"
+                              f"{criteria}")
             continue
         if cell.get("cell_type") != "code":
             continue
         source = cell_source(cell)
         info = exercise_info(cell)
-        where = f"{name}, cell {index}"
         if SOLUTION_BEGIN not in source:
             if info is not None:
                 raise ValueError(f"{where}: exercise {info['exercise']!r} has no solution block")
@@ -267,7 +376,8 @@ def exercises(folder: str | Path) -> list[dict[str, Any]]:
     found = []
     for path in notebooks_in(folder):
         for cell in read_notebook(path)["cells"]:
-            info = graded_info(cell)
+            info = exercise_info(cell)
+            info = {**info, "kind": "code"} if info else _answer_info_in(cell, path.name)
             if info is not None:
                 found.append({"notebook": path.stem, **info})
     return found

@@ -133,6 +133,9 @@ def pytest_runtest_logreport(report):
         elif " (not loaded):" in text:
             record["outcome"] = "not loaded"
         record["earned"] = 0
+        if report.when == "call" and record.get("share"):  # a rubric partly met
+            record["outcome"] = "partly met"
+            record["earned"] = record["points"] * record["share"]
         if not record.get("message"):  # the first failure says the most
             crash = getattr(report.longrepr, "reprcrash", None)
             record["message"] = crash.message if crash is not None else str(report.longrepr)
@@ -153,8 +156,9 @@ def _grade_items() -> list[dict]:
         entry["outcomes"].append(record["outcome"])
         if record.get("message") and not entry.get("message"):
             entry["message"] = record["message"]
-        if "text" in record:
-            entry["text"] = record["text"]
+        for key in ("text", "rubric"):
+            if key in record:
+                entry[key] = record[key]
     items = []
     for entry in merged.values():
         outcomes = entry.pop("outcomes")
@@ -320,26 +324,46 @@ def student(request):
 class WrittenAnswer:
     """A written answer (a Markdown cell) of the student's notebook: its text, never run.
 
-    Scored for presence and length only
-    (:func:`dlo_course.grading.notebooks.written_answer_problem`); the text goes verbatim
-    into the grades (``--grades-json``, the class CSV) for the instructor to read."""
+    No points if it is missing or too short
+    (:func:`dlo_course.grading.notebooks.written_answer_problem`); else, with a rubric, the
+    share of its criteria met (:func:`dlo_course.grading.notebooks.written_answer_score`):
+    the test fails listing the criteria not met, and ``record["share"]`` makes that failure
+    earn its partial points (:func:`pytest_runtest_logreport`). The text, and which criteria
+    it met, go into the grades (``--grades-json``, the class CSV) for the instructor."""
 
-    def __init__(self, name: str, text: str, min_words: int):
+    def __init__(self, name: str, text: str, min_words: int, rubric=(), record=None):
         self.name, self.text, self.min_words = name, text, min_words
+        self.rubric, self.record = list(rubric), record
 
     def check(self) -> None:
-        from dlo_course.grading.notebooks import written_answer_problem
+        from dlo_course.grading.notebooks import (rubric_met, written_answer_problem,
+                                                  written_answer_score)
 
+        met = rubric_met(self.text, self.rubric)
+        if self.record is not None and self.rubric:
+            self.record["rubric"] = [{"criterion": item["criterion"], "met": ok}
+                                     for item, ok in zip(self.rubric, met)]
         problem = written_answer_problem(self.text, self.min_words)
         if problem:
             pytest.fail(f"{self.name}: {problem}", pytrace=False)
+        share = written_answer_score(self.text, self.min_words, self.rubric)
+        if share < 1:
+            if self.record is not None:
+                self.record["share"] = share
+            missing = "; ".join(f"({number}) {item['criterion']}"
+                                for number, (item, ok) in enumerate(zip(self.rubric, met), 1)
+                                if not ok)
+            pytest.fail(f"{self.name}: {sum(met)} of {len(met)} criteria met; your answer "
+                        f"does not yet show: {missing}", pytrace=False)
 
 
 @pytest.fixture
 def written_answer(request):
     """The graded written answer (the test's ``exercise`` marker) as a :class:`WrittenAnswer`;
-    its text is recorded with the grades, even when it is too short."""
-    from dlo_course.grading.notebooks import written_answers
+    its text is recorded with the grades, even when it is too short. Its rubric is the
+    course's solution's when ``solutions/`` has the notebook (a student who edits or drops
+    the cell's metadata cannot change it), else the cell's own."""
+    from dlo_course.grading.notebooks import SOLUTIONS_DIR, written_answers
     from dlo_course.grading.runner import ExerciseError, find_notebook
 
     notebook = request.node.get_closest_marker("notebook").args[0]
@@ -351,7 +375,15 @@ def written_answer(request):
     if name not in answers:
         pytest.fail(f"{notebook}.ipynb: no written-answer cell for {name!r} (keep the cell "
                     f"and its first line <!-- answer: {name} ... -->)", pytrace=False)
+    rubric = answers[name]["rubric"]
+    solution = SOLUTIONS_DIR / f"{notebook}.ipynb"
+    if solution.is_file():
+        try:
+            rubric = written_answers(solution).get(name, {}).get("rubric", rubric)
+        except ValueError as err:
+            pytest.fail(str(err), pytrace=False)
     record = _GRADES.get(request.node.nodeid)
     if record is not None:
         record["text"] = answers[name]["text"]
-    return WrittenAnswer(name, answers[name]["text"], answers[name]["min_words"])
+    return WrittenAnswer(name, answers[name]["text"], answers[name]["min_words"], rubric,
+                         record)

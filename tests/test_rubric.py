@@ -1,0 +1,208 @@
+"""Rubrics of written answers (issue 30): reading and checking them, scoring an answer by the
+share of its criteria met, releasing them to the student, and reporting them to the
+instructor (feedback sheets, the class CSV, ``dlo-course course rubrics``).
+
+Everything runs on small real notebooks written to ``tmp_path``, graded by the real grader:
+a copy of ``tests/grading/conftest.py`` beside a small grading test file.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import subprocess
+
+import pytest
+from click.testing import CliRunner
+
+from dlo_course.cli import main
+from dlo_course.grading import notebooks
+from dlo_course.grading.grade import grade, grading_command
+from dlo_course.paths import REPO_ROOT
+
+STEM = "98_rubric_demo"  # not a course notebook: the grader falls back to the cell's rubric
+RUBRIC = [{"criterion": "commits to a number of cells", "patterns": [r"\d", r"\bnone\b"]},
+          {"criterion": "gives a reason", "patterns": [r"\bbecause\b", r"\bsince\b"]}]
+NOTE = ("A good answer names a number of cells, for instance 6, and says why, because the "
+        "threshold is tight.")
+GRADING_TEST = f'''
+import pytest
+
+pytestmark = pytest.mark.notebook("{STEM}")
+
+
+@pytest.mark.exercise("prediction_cells", points=2)
+def test_prediction_cells(written_answer):
+    written_answer.check()
+
+
+@pytest.mark.exercise("analysis_free", points=1)
+def test_analysis_free(written_answer):
+    written_answer.check()
+'''
+
+
+def answer_cell(name: str, points: int, min_words: int, text: str, rubric=None) -> dict:
+    meta = {"answer": name, "points": points, "min_words": min_words}
+    if rubric is not None:
+        meta["rubric"] = rubric
+    first = f"<!-- answer: {name} ({points} points, at least {min_words} words) -->"
+    return {"cell_type": "markdown", "id": name.replace("_", "-"),
+            "metadata": {"dlo_course": meta}, "source": f"{first}\n{text}"}
+
+
+def demo_notebook(prediction: str, rubric=RUBRIC, free: str = "Any ten words of my own here "
+                  "will do for this free answer.") -> dict:
+    cells = [{"cell_type": "markdown", "id": "intro", "metadata": {},
+              "source": ["# A rubric demo\n", "\n", "### Predict, then run: how many cells?"]},
+             answer_cell("prediction_cells", 2, 10, prediction, rubric),
+             {"cell_type": "code", "id": "run", "metadata": {}, "execution_count": None,
+              "outputs": [], "source": ["print(6)"]},
+             answer_cell("analysis_free", 1, 10, free)]
+    return {"cells": cells, "metadata": {}, "nbformat": 4, "nbformat_minor": 5}
+
+
+def grading_folder(tmp_path):
+    """The real grader (a copy of tests/grading/conftest.py) with a test file for the demo."""
+    folder = tmp_path / "grading"
+    folder.mkdir()
+    shutil.copy(notebooks.GRADING_TESTS_DIR / "conftest.py", folder / "conftest.py")
+    (folder / f"test_{STEM}.py").write_text(GRADING_TEST)
+    return folder
+
+
+def grade_one(tmp_path, nb: dict) -> dict[str, dict]:
+    student = tmp_path / "student"
+    notebooks.write_notebook(nb, student / f"{STEM}.ipynb")
+    out = tmp_path / "grades.json"
+    proc = subprocess.run(grading_command(student, grading_folder(tmp_path), out),
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    assert out.is_file(), proc.stdout[-3000:] + proc.stderr[-3000:]
+    return {e["exercise"]: e for e in json.loads(out.read_text())["exercises"]}
+
+
+# ------------------------------------------------------------------ reading and scoring
+
+
+def test_written_answers_return_their_rubric(tmp_path):
+    path = notebooks.write_notebook(demo_notebook(NOTE), tmp_path / f"{STEM}.ipynb")
+    answers = notebooks.written_answers(path)
+    assert answers["prediction_cells"]["rubric"] == RUBRIC
+    assert answers["analysis_free"]["rubric"] == []
+    assert "rubric" not in notebooks.answer_info(demo_notebook(NOTE)["cells"][3])
+
+
+@pytest.mark.parametrize("rubric, message", [
+    ({"criterion": "x", "patterns": ["a"]}, "must be a non-empty list"),
+    ([], "must be a non-empty list"),
+    ([{"criterion": "gives a reason"}], "exactly the keys 'criterion' and 'patterns'"),
+    ([{"criterion": "gives a reason", "pattern": ["because"]}], "exactly the keys"),
+    ([{"criterion": "", "patterns": ["because"]}], "must be one line of text"),
+    ([{"criterion": "gives a reason", "patterns": []}], "'patterns' must be a non-empty list"),
+    ([{"criterion": "gives a reason", "patterns": "because"}], "'patterns' must be a non-empty"),
+    ([{"criterion": "gives a reason", "patterns": ["(because"]}], "not a valid regular expr"),
+    ([{"criterion": "gives a reason", "patterns": ["because|"]}], "matches the empty text"),
+])
+def test_a_malformed_rubric_names_the_notebook_and_the_answer(tmp_path, rubric, message):
+    path = notebooks.write_notebook(demo_notebook(NOTE, rubric), tmp_path / f"{STEM}.ipynb")
+    for read in (lambda: notebooks.written_answers(path), lambda: notebooks.exercises(tmp_path),
+                 lambda: notebooks.release(tmp_path, tmp_path / "lessons")):
+        with pytest.raises(ValueError, match=message) as err:
+            read()
+        assert f"{STEM}.ipynb" in str(err.value) and "'prediction_cells'" in str(err.value)
+
+
+def test_score_is_the_share_of_criteria_met():
+    rubric = notebooks.check_rubric(RUBRIC, "prediction_cells")
+    both = "I expect 6 cells to pass, because the threshold is tight for the six-node rod."
+    one = "I expect most of the cells to pass, because the threshold is tight for this rod."
+    neither = "I expect most of the cells to pass; the threshold looks generous to me here."
+    assert notebooks.written_answer_score(both, 10, rubric) == 1
+    assert notebooks.written_answer_score(one, 10, rubric) == 0.5
+    assert notebooks.written_answer_score(neither, 10, rubric) == 0
+    assert notebooks.written_answer_score(neither, 10, None) == 1  # no rubric: length only
+    # every keyword, too short: nothing
+    assert notebooks.written_answer_score("6 because.", 10, rubric) == 0
+    assert notebooks.written_answer_score("", 10, rubric) == 0
+    assert notebooks.rubric_met("NONE, SINCE it fails", rubric) == [True, True]  # any case
+
+
+def test_the_grader_gives_partial_points_and_records_the_criteria(tmp_path):
+    one = "I expect most of the cells to pass, because the threshold is tight for this rod."
+    graded = grade_one(tmp_path, demo_notebook(one))
+    cells, free = graded["prediction_cells"], graded["analysis_free"]
+    assert (cells["earned"], cells["points"], cells["outcome"]) == (1, 2, "partly met")
+    assert cells["rubric"] == [{"criterion": "commits to a number of cells", "met": False},
+                               {"criterion": "gives a reason", "met": True}]
+    assert "1 of 2 criteria met" in cells["message"]
+    assert "(1) commits to a number of cells" in cells["message"]
+    assert (free["earned"], free["outcome"]) == (1, "passed") and "rubric" not in free
+
+
+@pytest.mark.parametrize("answer, earned", [
+    ("I expect 6 cells to pass, because the threshold is tight for the six-node rod.", 2),
+    ("I expect most of the cells to pass; the threshold looks generous to me here.", 0),
+    ("6 cells, because tight.", 0),  # every criterion met, but too short
+])
+def test_the_grader_scores_met_and_unmet_and_short_answers(tmp_path, answer, earned):
+    graded = grade_one(tmp_path, demo_notebook(answer))
+    assert graded["prediction_cells"]["earned"] == earned
+    assert graded["prediction_cells"]["outcome"] == ("passed" if earned else "failed")
+
+
+def test_the_grader_reports_a_malformed_rubric(tmp_path):
+    bad = [{"criterion": "gives a reason", "patterns": ["(because"]}]
+    graded = grade_one(tmp_path, demo_notebook(NOTE, bad))
+    entry = graded["prediction_cells"]
+    assert entry["earned"] == 0
+    assert f"{STEM}.ipynb" in entry["message"] and "'prediction_cells'" in entry["message"]
+    assert "not a valid regular expression" in entry["message"]
+
+
+# ------------------------------------------------------------------ release
+
+
+def test_release_lists_the_criteria_and_keeps_the_rubric(tmp_path):
+    notebooks.write_notebook(demo_notebook(NOTE), tmp_path / "solutions" / f"{STEM}.ipynb")
+    notebooks.release(tmp_path / "solutions", tmp_path / "lessons")
+    assert notebooks.release(tmp_path / "solutions", tmp_path / "lessons", check=True) == []
+    path = tmp_path / "lessons" / f"{STEM}.ipynb"
+    assert path.read_text(encoding="utf-8") == notebooks.notebook_json(
+        notebooks.read_notebook(path))  # Jupyter's layout
+    cell = notebooks.read_notebook(path)["cells"][1]
+    assert cell["metadata"]["dlo_course"]["rubric"] == RUBRIC
+    source = notebooks.cell_source(cell)
+    assert NOTE not in source  # the instructor's note is gone
+    assert source.split("\n") == [
+        "<!-- answer: prediction_cells (2 points, at least 10 words) -->",
+        notebooks.ANSWER_PLACEHOLDER, "",
+        "*Checked for:* (1) commits to a number of cells; (2) gives a reason"]
+    # the list of criteria is not the student's answer: it neither counts nor scores
+    assert notebooks.answer_text(cell) == ""
+    cell["source"] = source.replace(notebooks.ANSWER_PLACEHOLDER, "Few words.")
+    assert notebooks.answer_text(cell) == "Few words."
+    free = notebooks.cell_source(notebooks.read_notebook(path)["cells"][3])
+    assert notebooks.RUBRIC_PREFIX not in free  # no rubric, no list
+
+
+def test_release_check_sees_a_changed_rubric(tmp_path):
+    notebooks.write_notebook(demo_notebook(NOTE), tmp_path / "solutions" / f"{STEM}.ipynb")
+    notebooks.release(tmp_path / "solutions", tmp_path / "lessons")
+    changed = [RUBRIC[0], {"criterion": "names a cause", "patterns": [r"\bbecause\b"]}]
+    notebooks.write_notebook(demo_notebook(NOTE, changed),
+                             tmp_path / "solutions" / f"{STEM}.ipynb")
+    assert notebooks.release(tmp_path / "solutions", tmp_path / "lessons", check=True) == [
+        f"{STEM}.ipynb: differs from `dlo-course course release`"]
+
+
+# ------------------------------------------------------------------ the course's rubrics
+
+
+def test_every_rubric_of_the_course_is_valid_and_met_by_its_solution():
+    """The solutions' notes meet their own rubric (so the grader gives them full points)."""
+    for path in notebooks.notebooks_in(notebooks.SOLUTIONS_DIR):
+        for name, info in notebooks.written_answers(path).items():
+            met = notebooks.rubric_met(info["text"], info["rubric"])
+            unmet = [item["criterion"] for item, ok in zip(info["rubric"], met) if not ok]
+            assert not unmet, f"{path.name}: the solution's {name} does not meet {unmet}"
