@@ -667,6 +667,19 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
                f"for each student: {feedback})")
 
 
+@course_group.command("rubrics")
+@click.option("--solutions", type=click.Path(exists=True, file_okay=False, path_type=Path),
+              default=None, help="Solution notebooks [the repository's solutions/].")
+def course_rubrics(solutions: Path | None) -> None:
+    """Print every written answer's points, minimum length and rubric (Markdown)."""
+    from dlo_course.grading.notebooks import SOLUTIONS_DIR, rubrics_markdown
+
+    try:
+        click.echo(rubrics_markdown(solutions or SOLUTIONS_DIR), nl=False)
+    except ValueError as err:
+        raise click.ClickException(str(err)) from err
+
+
 @main.command()
 @click.option("--out", type=click.Path(file_okay=False, path_type=Path),
               default=Path("reports/reproduction"), show_default=True)

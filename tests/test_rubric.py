@@ -206,3 +206,72 @@ def test_every_rubric_of_the_course_is_valid_and_met_by_its_solution():
             met = notebooks.rubric_met(info["text"], info["rubric"])
             unmet = [item["criterion"] for item, ok in zip(info["rubric"], met) if not ok]
             assert not unmet, f"{path.name}: the solution's {name} does not meet {unmet}"
+
+
+# ------------------------------------------------------------------ the instructor's reports
+
+
+def test_feedback_sheets_and_the_class_csv_show_the_criteria(tmp_path):
+    catalog = tmp_path / "catalog"
+    notebooks.write_notebook(demo_notebook(NOTE), catalog / f"{STEM}.ipynb")
+    one = "I expect most of the cells to pass, because the threshold is tight for this rod."
+    submissions = tmp_path / "submissions"
+    notebooks.write_notebook(demo_notebook(NOTE), submissions / "alice" / f"{STEM}.ipynb")
+    notebooks.write_notebook(demo_notebook(one), submissions / "bob" / f"{STEM}.ipynb")
+    (submissions / "carol").mkdir()  # hands in nothing
+    out = tmp_path / "grades.csv"
+    grade(submissions, out, grading_folder(tmp_path), catalog=catalog, progress=False)
+    with out.open(newline="", encoding="utf-8") as f:
+        reader = csv.DictReader(f)
+        assert reader.fieldnames == [
+            "student", "prediction_cells", "analysis_free", "total", "max_total", "error",
+            "prediction_cells_text", "prediction_cells_rubric", "analysis_free_text",
+            "analysis_free_rubric"]
+        rows = {row["student"]: row for row in reader}
+    alice, bob, carol = rows["alice"], rows["bob"], rows["carol"]
+    assert alice["prediction_cells_rubric"] == "2/2 met" and float(alice["total"]) == 3
+    assert bob["prediction_cells_rubric"] == "1/2 met; missing: commits to a number of cells"
+    assert float(bob["prediction_cells"]) == 1 and float(bob["total"]) == 2
+    assert bob["prediction_cells_text"] == one
+    assert alice["analysis_free_rubric"] == bob["analysis_free_rubric"] == ""  # no rubric
+    assert carol["prediction_cells_rubric"] == "" and float(carol["total"]) == 0
+
+    sheets = tmp_path / "grades_feedback"
+    sheet = (sheets / "bob.md").read_text()
+    assert f"| {STEM} | `prediction_cells` | 1 / 2 | partly met (written answer, 16 words) |" \
+        in sheet
+    assert ("- `prediction_cells` (98_rubric_demo), 1 / 2:\n"
+            "  - [ ] commits to a number of cells (not met)\n"
+            "  - [x] gives a reason") in sheet
+    assert "1 of 2 criteria met; your answer does not yet show: (1) commits to a number" in sheet
+    assert "analysis_free` (" not in sheet  # no rubric, nothing to list
+    assert "Failed: " not in sheet and "conftest.py" not in sheet
+    good = (sheets / "alice.md").read_text()
+    assert "  - [x] commits to a number of cells\n  - [x] gives a reason" in good
+    assert "Every check passed." in good
+
+
+def test_the_rubrics_command_prints_every_rubric(tmp_path):
+    notebooks.write_notebook(demo_notebook(NOTE), tmp_path / f"{STEM}.ipynb")
+    result = CliRunner().invoke(main, ["course", "rubrics", "--solutions", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert result.output.split("\n")[2:9] == [
+        f"## {STEM}", "",
+        "- `prediction_cells`: 2 points, at least 10 words",
+        r"  1. commits to a number of cells (any of: `\d`, `\bnone\b`)",
+        r"  2. gives a reason (any of: `\bbecause\b`, `\bsince\b`)",
+        "- `analysis_free`: 1 point, at least 10 words; no rubric: all points if long enough",
+        ""]
+    bad = [{"criterion": "gives a reason", "patterns": ["(because"]}]
+    notebooks.write_notebook(demo_notebook(NOTE, bad), tmp_path / f"{STEM}.ipynb")
+    result = CliRunner().invoke(main, ["course", "rubrics", "--solutions", str(tmp_path)])
+    assert result.exit_code != 0
+    assert f"{STEM}.ipynb: written answer 'prediction_cells'" in result.output
+
+
+def test_the_course_rubrics_command_lists_every_written_answer():
+    result = CliRunner().invoke(main, ["course", "rubrics"])
+    assert result.exit_code == 0, result.output
+    for e in notebooks.exercises(notebooks.SOLUTIONS_DIR):
+        if e["kind"] == "text":
+            assert f"- `{e['exercise']}`: {e['points']} point" in result.output

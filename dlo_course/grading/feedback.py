@@ -1,5 +1,6 @@
-"""A student's feedback sheet (Markdown): the points of every exercise and, for each one that
-lost points, the failing check's message without the grader's traceback.
+"""A student's feedback sheet (Markdown): the points of every exercise, the criteria each
+written answer met and missed, and, for each exercise that lost points, the failing check's
+message without the grader's traceback.
 """
 
 from __future__ import annotations
@@ -42,8 +43,8 @@ def feedback_markdown(student: str, report: dict[str, Any],
                       known: list[dict[str, Any]] | None = None,
                       max_total: float | None = None) -> str:
     """One student's feedback sheet (Markdown): the total, a table of the points of every
-    exercise and, for each one that lost points, why: the failing check's message, without
-    the grader's traceback. ``report`` is :func:`grade_folder`'s; ``known`` the course's
+    exercise, each written answer's rubric (the criteria met and not met) and, for each one
+    that lost points, why: the failing check's message, without the grader's traceback. ``report`` is :func:`grade_folder`'s; ``known`` the course's
     exercises (:func:`exercises`), so that a notebook not handed in still shows its
     exercises."""
     graded = {e["exercise"]: e for e in report.get("exercises", [])}
@@ -69,6 +70,14 @@ def feedback_markdown(student: str, report: dict[str, Any],
             result += f" (written answer, {words} word{'s' if words != 1 else ''})"
         lines.append(f"| {e['notebook']} | `{e['exercise']}` | {e.get('earned', 0):g} / "
                      f"{e['points']:g} | {result} |")
+    rubrics = [e for e in entries if e.get("rubric")]
+    if rubrics:
+        lines += ["", "## Written answers: what each was checked for", ""]
+        for e in rubrics:
+            lines.append(f"- `{e['exercise']}` ({e['notebook']}), {e.get('earned', 0):g} / "
+                         f"{e['points']:g}:")
+            lines += [f"  - [{'x' if item['met'] else ' '}] {item['criterion']}"
+                      f"{'' if item['met'] else ' (not met)'}" for item in e["rubric"]]
     lost = [e for e in entries if e.get("earned", 0) < e["points"]]
     if lost:
         lines += ["", "## What to look at", ""]
@@ -80,3 +89,13 @@ def feedback_markdown(student: str, report: dict[str, Any],
     else:
         lines += ["", "Every check passed."]
     return "\n".join(lines).rstrip() + "\n"
+
+
+def rubric_summary(rubric: list[dict[str, Any]] | None) -> str:
+    """A written answer's rubric result in one line, for the class CSV: ``"1/2 met; missing:
+    gives a reason"`` (``""`` without a rubric)."""
+    if not rubric:
+        return ""
+    missing = [item["criterion"] for item in rubric if not item["met"]]
+    summary = f"{len(rubric) - len(missing)}/{len(rubric)} met"
+    return summary + (f"; missing: {'; '.join(missing)}" if missing else "")

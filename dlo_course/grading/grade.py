@@ -13,7 +13,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, Iterable
 
-from dlo_course.grading.feedback import feedback_markdown
+from dlo_course.grading.feedback import feedback_markdown, rubric_summary
 from dlo_course.grading.notebooks import GRADING_TESTS_DIR, SOLUTIONS_DIR, exercises
 from dlo_course.paths import REPO_ROOT
 
@@ -69,7 +69,8 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     that student's notebooks. Columns: ``student``, one column of points per exercise and
     written answer (in the order of the course), ``total``, ``max_total``, ``error`` (empty
     when grading ran), then one column ``<answer>_text`` per written answer holding what the
-    student wrote, verbatim (its points only say that it is there and long enough).
+    student wrote, verbatim, each followed by ``<answer>_rubric``: the criteria of its rubric
+    met, e.g. ``1/2 met; missing: gives a reason`` (empty without a rubric).
 
     Beside the CSV: ``<out stem>_logs/<student>.txt``, the grader's full output, and
     ``<out stem>_feedback/<student>.md``, a feedback sheet for the student: the points of
@@ -119,11 +120,13 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
                "max_total": max_total, "error": report["error"] or ""}
         row.update({f"{e['exercise']}_text": e["text"] for e in report["exercises"]
                     if "text" in e})
+        row.update({f"{e['exercise']}_rubric": rubric_summary(e["rubric"])
+                    for e in report["exercises"] if "rubric" in e})
         rows.append(row)
         (feedback / f"{student.name}.md").write_text(
             feedback_markdown(student.name, report, known, max_total), encoding="utf-8")
     out.parent.mkdir(parents=True, exist_ok=True)
-    text_columns = [f"{name}_text" for name in texts]
+    text_columns = [f"{name}_{part}" for name in texts for part in ("text", "rubric")]
     with out.open("w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, fieldnames=["student", *columns, "total", "max_total",
                                                "error", *text_columns])
