@@ -1,7 +1,7 @@
 """Grading: lesson 12, hindsight relabelling (reference: dlo_course.her).
 
-``goal_distance`` and ``relabel`` are compared with the library on fixed inputs (``relabel``
-is given its steps and goal steps, so its answer is deterministic). ``future_goal_steps``
+``relabel`` is compared with the library on fixed inputs (it is given its steps and goal
+steps, so its answer is deterministic). ``future_goal_steps``
 draws at random, so any correct sampler must pass, whatever generator calls it makes: its
 draws are checked for shape, range, reproducibility and uniformity. The uniformity bands are
 calibrated: a correct uniform sampler fails the whole test with a probability below 1e-6
@@ -21,40 +21,6 @@ from dlo_course import her
 pytestmark = pytest.mark.notebook("12_hindsight_relabelling")
 
 FIELDS = ("obs", "act", "rew", "next_obs", "done")
-
-
-# ------------------------------------------------------------------ goal_distance
-
-
-def distance_cases():
-    """(achieved, desired) pairs: one pair, batches, two leading axes, one node, float32."""
-    rng = np.random.default_rng(12)
-    shapes = [((4, 3), np.float64), ((7, 4, 3), np.float32), ((2, 3, 6, 3), np.float64),
-              ((5, 1, 3), np.float64), ((3, 2, 3), np.float32)]
-    cases = [tuple(rng.normal(scale=0.5, size=(2, *shape)).astype(dtype))
-             for shape, dtype in shapes]
-    same = rng.normal(size=(4, 2, 3))
-    cases.append((same, same.copy()))  # distance 0
-    return cases
-
-
-def probe_goal_distance(fn, cases):
-    return [np.asarray(fn(achieved.copy(), desired.copy())) for achieved, desired in cases]
-
-
-@pytest.mark.exercise("goal_distance", points=1, reference="dlo_course.her.goal_distance")
-def test_goal_distance(student):
-    cases = distance_cases()
-    got = student.run(probe_goal_distance, cases)
-    for k, ((achieved, desired), mine) in enumerate(zip(cases, got, strict=True)):
-        want = her.goal_distance(achieved, desired)
-        where = f"case {k}: inputs of shape {achieved.shape} ({achieved.dtype})"
-        assert mine.shape == want.shape, f"{where}: result of shape {mine.shape}, " \
-                                         f"expected {want.shape} (one distance per pair)"
-        assert mine.dtype == np.float64, f"{where}: result dtype {mine.dtype}, expected float64"
-        # float64 inputs: the same arithmetic; float32 ones: tolerate a float32 subtraction
-        rtol = 1e-12 if achieved.dtype == np.float64 else 1e-6
-        np.testing.assert_allclose(mine, want, rtol=rtol, atol=1e-12, err_msg=where)
 
 
 # -------------------------------------------------------------- future_goal_steps
@@ -225,7 +191,8 @@ def probe_relabel(fn, cases):
     return results
 
 
-@pytest.mark.exercise("relabel", points=2, reference="dlo_course.her.relabel")
+@pytest.mark.exercise("relabel", points=3,
+                      reference=("dlo_course.her.relabel", "dlo_course.her.goal_distance"))
 def test_relabel(student):
     cases = relabel_cases()
     got = student.run(probe_relabel, cases)
@@ -259,3 +226,8 @@ def test_relabel(student):
         assert mine["untouched"], f"{where}: relabel changed the episode's arrays"
         assert mine["untouched_after_writing"], \
             f"{where}: the copies share memory with the episode's arrays"
+
+
+@pytest.mark.exercise("prediction_successes", points=1)
+def test_prediction_successes(written_answer):
+    written_answer.check()

@@ -1,6 +1,6 @@
 """Grading: lesson 15, why DDPG stalls (references: dlo_course.diagnostics.saturation_report,
-dlo_course.diagnostics.discounted_returns, dlo_course.ddpg.smoothed_target_action,
-dlo_course.ddpg.td3_target, dlo_course.ddpg.actor_update_due)."""
+dlo_course.diagnostics.critic_check with discounted_returns, dlo_course.ddpg.smoothed_target_action,
+dlo_course.ddpg.td3_target, dlo_course.ddpg.DDPG.update)."""
 
 import numpy as np
 import pytest
@@ -64,32 +64,64 @@ def test_saturation_report(student):
                                                f"{SATURATION_HINTS[key]}")
 
 
-# ------------------------------------------------------------- discounted_returns
+# ------------------------------------------------------------------ overestimation
 
-RETURN_CASES = [(0, 5, 0.9, 0.0), (1, 30, 0.99, 0.0), (2, 12, 0.5, -4.0), (3, 1, 0.99, 7.5),
-                (4, 0, 0.9, 3.0)]
+# (seed, episode lengths, gamma, compared): episodes shorter and longer than `compared`
+OVER_CASES = [(0, (12, 9), 0.9, 6), (1, (30,), 0.99, 20), (2, (5, 14, 8), 0.95, 10)]
 
 
-def probe_discounted_returns(fn):
+def overestimation_case(seed, lengths):
+    """A critic and episodes of negative rewards, some of whose Q are above the returns."""
+    torch.manual_seed(seed)
+    critic = ddpg.Critic(3, 2, hidden_sizes=(16,), final_init=2.0)
+    rng = np.random.default_rng(seed)
+    episodes = [{"obs": rng.normal(size=(t, 3)).astype(np.float32),
+                 "act": rng.uniform(-1, 1, (t, 2)).astype(np.float32),
+                 "rew": -rng.uniform(0.0, 0.3, t)} for t in lengths]
+    return critic, episodes
+
+
+def reference_overestimation(critic, episodes, gamma, compared):
+    """The library's measurement: diagnostics.discounted_returns over each whole episode,
+    cut to its first `compared` steps, then diagnostics.critic_check."""
+    returns = np.concatenate([diagnostics.discounted_returns(e["rew"], gamma)[:compared]
+                              for e in episodes])
+    check = diagnostics.critic_check(critic, np.concatenate([e["obs"][:compared] for e in episodes]),
+                                     np.concatenate([e["act"][:compared] for e in episodes]),
+                                     returns)
+    return {"q": check["q"], "returns": returns, "bias": check["bias"],
+            "overestimated": float(np.mean(check["q"] > returns))}
+
+
+def probe_overestimation(fn):
     out = []
-    for seed, length, gamma, bootstrap in RETURN_CASES:
-        rewards = list(np.random.default_rng(seed).normal(size=length))  # a plain list
-        out.append(np.asarray(fn(rewards, gamma, bootstrap=bootstrap), dtype=np.float64))
+    for seed, lengths, gamma, compared in OVER_CASES:
+        critic, episodes = overestimation_case(seed, lengths)
+        got = fn(critic, episodes, gamma, compared)
+        out.append({key: np.asarray(got[key], dtype=np.float64)
+                    for key in ("q", "returns", "bias", "overestimated") if key in got})
     return out
 
 
-@pytest.mark.exercise("discounted_returns", points=2,
-                      reference="dlo_course.diagnostics.discounted_returns")
-def test_discounted_returns(student):
-    got = student.run(probe_discounted_returns)
-    want = probe_discounted_returns(diagnostics.discounted_returns)
-    for (seed, length, gamma, bootstrap), mine, ref in zip(RETURN_CASES, got, want, strict=True):
-        where = f"{length} rewards, gamma {gamma}, bootstrap {bootstrap}"
-        assert mine.shape == ref.shape, f"{where}: shape {mine.shape}, expected {ref.shape} " \
-                                        f"(one return per step)"
-        np.testing.assert_allclose(mine, ref, rtol=1e-9, atol=1e-12,
-                                   err_msg=f"{where}: G_t = r_t + gamma * G_(t+1), G_T = "
-                                           f"bootstrap")
+@pytest.mark.exercise("overestimation", points=2,
+                      reference=("dlo_course.diagnostics.critic_check",
+                                 "dlo_course.diagnostics.discounted_returns"))
+def test_overestimation(student):
+    got = student.run(probe_overestimation)
+    for (seed, lengths, gamma, compared), mine in zip(OVER_CASES, got, strict=True):
+        critic, episodes = overestimation_case(seed, lengths)
+        want = reference_overestimation(critic, episodes, gamma, compared)
+        where = f"episodes of {lengths} steps, gamma {gamma}, compared {compared}"
+        for key, hint in (("returns", "each episode's returns over the whole episode, then "
+                                      "its first `compared` steps, the episodes in order"),
+                          ("q", "Q(s_t, a_t) of the compared steps, in the same order"),
+                          ("bias", "the mean of Q - G"),
+                          ("overestimated", "the share of compared steps with Q > G")):
+            assert key in mine, f"missing {key!r}"
+            assert np.shape(mine[key]) == np.shape(want[key]), \
+                f"{where}: {key} of shape {np.shape(mine[key])}, expected {np.shape(want[key])}"
+            np.testing.assert_allclose(mine[key], want[key], rtol=1e-5, atol=1e-7,
+                                       err_msg=f"{where}: {key}: {hint}")
 
 
 # ------------------------------------------------------ smoothed_target_action
@@ -181,20 +213,64 @@ def test_td3_target(student):
                                           f"without gradient (torch.no_grad())"
 
 
-# ------------------------------------------------------------ actor_update_due
+# ------------------------------------------------------------------ td3_update
 
-DELAY_GRID = [(k, d) for d in (1, 2, 3, 5) for k in range(1, 13)]
+# (twin critics, policy delay, target noise, noise clip, pre-tanh penalty, updates)
+UPDATE_CASES = [(True, 2, 0.2, 0.5, 0.01, 5), (False, 1, 0.0, 0.5, 0.0, 3),
+                (True, 3, 0.1, 0.05, 0.0, 7), (False, 2, 0.3, 0.2, 0.05, 4)]
+NETWORKS = ("actor", "critic", "critic2", "actor_target", "critic_target", "critic2_target")
 
 
-def probe_actor_update_due(fn):
-    return [bool(fn(k, d)) for k, d in DELAY_GRID]
+def probe_td3_update(fn):
+    """Agents updated by fn, from fixed weights, batches and noise seeds: whether the actor
+    stepped at each update, the update count, and every network's weights after."""
+    out = []
+    for case, (twin, delay, noise, clip, penalty, updates) in enumerate(UPDATE_CASES):
+        config = ddpg.DDPGConfig(hidden_sizes=(16,), twin_critics=twin, policy_delay=delay,
+                                 target_noise=noise, target_noise_clip=clip,
+                                 preactivation_l2=penalty)
+        torch.manual_seed(case)
+        agent = ddpg.DDPG(4, 2, action_low=[-2.0, 0.0], action_high=[2.0, 1.0], config=config)
+        rng = np.random.default_rng(case)
+        stepped = []
+        for k in range(updates):
+            batch = {"obs": rng.normal(size=(16, 4)), "act": rng.uniform(-1, 1, (16, 2)),
+                     "rew": rng.normal(size=16), "next_obs": rng.normal(size=(16, 4)),
+                     "done": (rng.uniform(size=16) < 0.2).astype(np.float64)}
+            torch.manual_seed(1000 * case + k)  # the smoothing noise
+            stepped.append(bool(fn(agent, batch)))
+        weights = {name: [p.detach().clone().numpy() for p in getattr(agent, name).parameters()]
+                   for name in NETWORKS if getattr(agent, name) is not None}
+        out.append({"stepped": stepped, "updates": int(agent.updates), "weights": weights})
+    return out
 
 
-@pytest.mark.exercise("actor_update_due", points=1,
-                      reference=("dlo_course.ddpg.actor_update_due", "dlo_course.ddpg.DDPG.update"))
-def test_actor_update_due(student):
-    got = student.run(probe_actor_update_due)
-    want = probe_actor_update_due(ddpg.actor_update_due)
-    wrong = [f"update {k}, delay {d}: {g} (expected {w})"
-             for (k, d), g, w in zip(DELAY_GRID, got, want, strict=True) if g != w]
-    assert not wrong, "the actor steps at critic updates d, 2d, 3d, ...: " + "; ".join(wrong[:4])
+def library_td3_update(agent, batch):
+    return "policy_loss" in agent.update(batch)
+
+
+@pytest.mark.exercise("td3_update", points=2,
+                      reference=("dlo_course.ddpg.DDPG.update", "dlo_course.ddpg.actor_update_due"))
+def test_td3_update(student):
+    got = student.run(probe_td3_update)
+    want = probe_td3_update(library_td3_update)
+    for case, mine, ref in zip(UPDATE_CASES, got, want, strict=True):
+        twin, delay, noise, clip, penalty, updates = case
+        where = (f"{'twin critics' if twin else 'one critic'}, policy delay {delay}, target "
+                 f"noise {noise} (clip {clip}), penalty {penalty}")
+        assert mine["updates"] == ref["updates"], \
+            f"{where}: agent.updates is {mine['updates']} after {updates} updates"
+        assert mine["stepped"] == ref["stepped"], (
+            f"{where}: the actor stepped at {mine['stepped']}, expected {ref['stepped']} "
+            f"(at critic updates d, 2d, 3d, ...)")
+        for name, params in ref["weights"].items():
+            for i, (a, b) in enumerate(zip(mine["weights"][name], params, strict=True)):
+                np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-6, err_msg=(
+                    f"{where}: {name} differs after {updates} updates (parameter {i}): the "
+                    f"critics' label, their steps, the actor's loss with the penalty, or the "
+                    f"soft updates"))
+
+
+@pytest.mark.exercise("prediction_overestimation", points=1)
+def test_prediction_overestimation(written_answer):
+    written_answer.check()
