@@ -214,6 +214,8 @@ def test_every_rubric_of_the_course_is_valid_and_met_by_its_solution():
 def test_feedback_sheets_and_the_class_csv_show_the_criteria(tmp_path):
     catalog = tmp_path / "catalog"
     notebooks.write_notebook(demo_notebook(NOTE), catalog / f"{STEM}.ipynb")
+    other = {**demo_notebook(NOTE), "cells": [answer_cell("prediction_other", 1, 5, NOTE, RUBRIC)]}
+    notebooks.write_notebook(other, catalog / "97_not_handed_in.ipynb")  # no one grades it
     one = "I expect most of the cells to pass, because the threshold is tight for this rod."
     submissions = tmp_path / "submissions"
     notebooks.write_notebook(demo_notebook(NOTE), submissions / "alice" / f"{STEM}.ipynb")
@@ -224,7 +226,8 @@ def test_feedback_sheets_and_the_class_csv_show_the_criteria(tmp_path):
     with out.open(newline="", encoding="utf-8") as f:
         reader = csv.DictReader(f)
         assert reader.fieldnames == [
-            "student", "prediction_cells", "analysis_free", "total", "max_total", "error",
+            "student", "prediction_other", "prediction_cells", "analysis_free", "total",
+            "max_total", "error", "prediction_other_text", "prediction_other_rubric",
             "prediction_cells_text", "prediction_cells_rubric", "analysis_free_text",
             "analysis_free_rubric"]
         rows = {row["student"]: row for row in reader}
@@ -235,6 +238,7 @@ def test_feedback_sheets_and_the_class_csv_show_the_criteria(tmp_path):
     assert bob["prediction_cells_text"] == one
     assert alice["analysis_free_rubric"] == bob["analysis_free_rubric"] == ""  # no rubric
     assert carol["prediction_cells_rubric"] == "" and float(carol["total"]) == 0
+    assert alice["prediction_other_rubric"] == "" and float(alice["max_total"]) == 4
 
     sheets = tmp_path / "grades_feedback"
     sheet = (sheets / "bob.md").read_text()
@@ -244,11 +248,13 @@ def test_feedback_sheets_and_the_class_csv_show_the_criteria(tmp_path):
             "  - [ ] commits to a number of cells (not met)\n"
             "  - [x] gives a reason") in sheet
     assert "1 of 2 criteria met; your answer does not yet show: (1) commits to a number" in sheet
-    assert "analysis_free` (" not in sheet  # no rubric, nothing to list
+    assert "- `analysis_free` (" not in sheet  # no rubric, nothing to list
+    assert "| 97_not_handed_in | `prediction_other` | 0 / 1 | not graded |" in sheet
+    assert "- `prediction_other` (" not in sheet  # not graded: no criteria met or missed
     assert "Failed: " not in sheet and "conftest.py" not in sheet
     good = (sheets / "alice.md").read_text()
     assert "  - [x] commits to a number of cells\n  - [x] gives a reason" in good
-    assert "Every check passed." in good
+    assert "Every check passed." not in good  # prediction_other was not handed in
 
 
 def test_the_rubrics_command_prints_every_rubric(tmp_path):

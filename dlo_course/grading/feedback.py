@@ -70,7 +70,8 @@ def feedback_markdown(student: str, report: dict[str, Any],
             result += f" (written answer, {words} word{'s' if words != 1 else ''})"
         lines.append(f"| {e['notebook']} | `{e['exercise']}` | {e.get('earned', 0):g} / "
                      f"{e['points']:g} | {result} |")
-    rubrics = [e for e in entries if e.get("rubric")]
+    # what the grader found ("met" per criterion); not a catalog's rubric of an ungraded answer
+    rubrics = [e for e in entries if e.get("rubric") and "met" in e["rubric"][0]]
     if rubrics:
         lines += ["", "## Written answers: what each was checked for", ""]
         for e in rubrics:
