@@ -58,10 +58,49 @@ DERIVED = {
     ("15_why_ddpg_stalls", "0.02%"),  # 1 - tanh(5)^2
     ("15_why_ddpg_stalls", "1%"),     # 1 - tanh(3)^2
     ("15_why_ddpg_stalls", "95%"),    # a 95% confidence interval, and the ablation's 95 (above)
+    ("14_classical_shape_servoing", "95%"),  # the confidence level of the table's intervals
 }
 
 CHECKED = ("04_ddpg", "05_soft_bodies_in_pybullet", "07_deformation_databases",
-           "12_hindsight_relabelling", "15_why_ddpg_stalls")
+           "12_hindsight_relabelling", "14_classical_shape_servoing", "15_why_ddpg_stalls",
+           "16_robustness")
+
+# Settings a lesson's markdown states and one of its code cells prints from the library:
+# (notebook, number as written, what the printing cell names, the library's value in the unit
+#  written, the value written). The test fails when the library's default moves.
+LIBRARY_SETTINGS = [
+    ("14_classical_shape_servoing", "3 ms of physics", "physics.physics_time_per_action",
+     lambda: 1000 * _sim().SimParams().physics_time_per_action, 3),
+    ("14_classical_shape_servoing", "0.06 s per action", "time_mode='paper'",
+     lambda: _sim().SimParams(time_mode="paper").physics_time_per_action, 0.06),
+    ("14_classical_shape_servoing", "1.55 m", "physics.length", lambda: _sim().SimParams().length,
+     1.55),
+    ("14_classical_shape_servoing", "at most 1 cm per action", '"max_move"',
+     lambda: 100 * _servo().JacobianController(n_nodes=4).max_move, 1),
+    ("14_classical_shape_servoing", "Broyden gain of 0.3", '"broyden_gain"',
+     lambda: _servo().JacobianController(n_nodes=4).broyden_gain, 0.3),
+    ("14_classical_shape_servoing", "6 cm per action", "controller.metres_per_action",
+     lambda: 100 * _servo().JacobianController(n_nodes=4).metres_per_action, 6),
+    ("16_robustness", "2.5 MPa", "base.youngs_modulus / 1e6",
+     lambda: _sim().SimParams().youngs_modulus / 1e6, 2.5),
+    ("16_robustness", "$\\nu$ = 0.3", "base.poisson_ratio",
+     lambda: _sim().SimParams().poisson_ratio, 0.3),
+    ("16_robustness", "0.2 kg", "base.mass", lambda: _sim().SimParams().mass, 0.2),
+    ("16_robustness", "3 ms of physics", "base.physics_time_per_action",
+     lambda: 1000 * _sim().SimParams().physics_time_per_action, 3),
+]
+
+
+def _sim():
+    from dlo_course import simulation
+
+    return simulation
+
+
+def _servo():
+    from dlo_course import jacobian
+
+    return jacobian
 
 PERCENT = re.compile(r"(?<![\w.])\d+(?:\.\d+)?%")
 PLUS_MINUS = re.compile(r"[−-]?\d+(?:\.\d+)?\s*(?:±|\\pm)\s*\d+(?:\.\d+)?")
@@ -93,6 +132,19 @@ def test_each_listed_number_is_printed_or_marked_offline(stem, number, results_f
         assert read_by_a_cell(stem, results_file), f"{stem}: no code cell reads {results_file}"
         assert evidence in (REPO / results_file).read_text(encoding="utf-8"), \
             f"{results_file} does not hold {evidence!r} ({stem}: {number!r})"
+
+
+@pytest.mark.parametrize("stem, number, printed_as, library, written", LIBRARY_SETTINGS,
+                         ids=[f"{s[0][:2]}:{s[1]}" for s in LIBRARY_SETTINGS])
+def test_each_listed_setting_is_printed_and_is_the_library_s(stem, number, printed_as, library,
+                                                            written):
+    assert any(" ".join(number.split()) in " ".join(text.split())
+               for kind, text in cells(stem) if kind == "markdown"), \
+        f"{stem}: {number!r} is no longer in the markdown (update LIBRARY_SETTINGS)"
+    assert any(kind == "code" and printed_as in text for kind, text in cells(stem)), \
+        f"{stem}: no code cell prints {printed_as} ({number!r})"
+    assert library() == pytest.approx(written), \
+        f"{stem} says {number!r}, but the library's value is now {library()}"
 
 
 def test_listed_results_files_exist():

@@ -223,3 +223,11 @@ def test_damped_least_squares_step_refuses_a_negative_damping(student):
     assert raised == "ValueError", (
         f"a negative damping must raise ValueError (raised: {raised}): only its square "
         "enters the formula, and a negative value is a mistake of the caller")
+
+
+# ------------------------------------------------------------------------ written answers
+
+
+@pytest.mark.exercise("prediction_controller_vs_agent", points=1)
+def test_prediction_controller_vs_agent(written_answer):
+    written_answer.check()

@@ -168,3 +168,9 @@ def test_draw_factors(student):
         assert got["repeat"][k] == mine, f"{ranges}: the same seed must give the same factors"
     for ranges, raised in zip(DRAW_BAD, got["raised"], strict=True):
         assert raised == "ValueError", f"draw_factors({ranges}) must raise ValueError ({raised})"
+
+
+# ------------------------------------------------------------------ written answers
+@pytest.mark.exercise("prediction_robustness", points=1)
+def test_prediction_robustness(written_answer):
+    written_answer.check()
