@@ -13,13 +13,18 @@ pytestmark = pytest.mark.notebook("05_soft_bodies_in_pybullet")
 
 
 def random_meshes():
-    """The paper's rod, a thin rod of another size, and random (partly inverted) tetrahedra."""
+    """The paper's rod, a thin rod of another size, and random (partly inverted) tetrahedra,
+    one set of them fresh at every grading."""
     rng = np.random.default_rng(5)
     yield make_rod_mesh()
     yield make_rod_mesh(length=0.4, radius=0.01)
     points = rng.normal(size=(30, 3))
     tets = np.array([rng.choice(30, 4, replace=False) for _ in range(25)])
     yield TetMesh(points, tets)
+    fresh = np.random.default_rng()  # and a mesh drawn afresh at every grading
+    n = int(fresh.integers(5, 60))
+    tets = np.array([fresh.choice(n, 4, replace=False) for _ in range(int(fresh.integers(1, 80)))])
+    yield TetMesh(fresh.uniform(-1, 1, size=(n, 3)), tets)
 
 
 TWO = np.array([[0, 1, 2, 3], [1, 2, 3, 4]])  # two tetrahedra sharing the face (1, 2, 3)
@@ -84,3 +89,11 @@ def test_lame_parameters(student):
     got = student.run(probe_lame_parameters)
     np.testing.assert_allclose(np.asarray(got, dtype=float),
                                np.asarray(probe_lame_parameters(lame_parameters)), rtol=1e-12)
+
+
+# ------------------------------------------------------------------ written answers
+
+
+@pytest.mark.exercise("prediction_substep", points=1)
+def test_prediction_substep(written_answer):
+    written_answer.check()

@@ -55,30 +55,67 @@ def test_level_moves(student):
                                    err_msg=f"{name} box, direction {direction}")
 
 
-@pytest.mark.exercise("sweep_count", points=1, reference="dlo_course.database.authors_sweep")
-def test_sweep_count(student):
-    divisions = [(5, 20, 5), (8, 22, 10)] + [tuple(box.divisions) for box in TEST_BOXES] \
-        + [(4, 4, 0), (0, 3, 1), (7, 2, 4)]
-    expected = []
-    for d in divisions:
-        box = Box("t", (-0.1, -0.1, -0.1), (0.1, 0.1, 0.0), d)
-        expected.append(int(authors_sweep(box).recorded.sum()))
-        assert expected[-1] == box.expected_count
-    assert expected[:2] == [930, 2651]
-    got = student.run(probe_each, [(d,) for d in divisions])
-    for count, want, d in zip(got, expected, divisions, strict=True):
-        assert count.size == 1 and int(count) == want, f"divisions {d}: {count}, expected {want}"
+def random_box(rng, name):
+    """A fresh box: walls around the initial tip (the top at its height), random divisions."""
+    low = (rng.uniform(-0.2, -0.01), rng.uniform(-0.4, -0.01), rng.uniform(-0.3, -0.05))
+    high = (rng.uniform(0.0, 0.1), rng.uniform(0.01, 0.4), 0.0)
+    divisions = (int(rng.integers(0, 9)), int(rng.integers(0, 13)), int(rng.integers(0, 6)))
+    return Box(name, low, high, divisions)
 
 
-@pytest.mark.exercise("inside_box", points=1, reference="dlo_course.database.Box.contains")
-def test_inside_box(student):
-    rng = np.random.default_rng(7)
-    small = BOXES["small"]
-    points = np.concatenate([rng.uniform(-0.5, 0.5, size=(500, 3)),
-                             authors_sweep(BOXES["large"]).offsets,
-                             [small.low, small.high]])  # corners: borders are inside
-    low, high = np.asarray(small.low), np.asarray(small.high)
-    (got,) = student.run(probe_each, [(points, low, high)])
-    expected = small.contains(points)
-    assert got.shape == expected.shape
-    np.testing.assert_array_equal(got.astype(bool), expected)
+def as_data(box):
+    return (box.name, tuple(map(float, box.low)), tuple(map(float, box.high)),
+            tuple(map(int, box.divisions)))
+
+
+def sweep_cases(rng):
+    """(box, region) pairs: the paper's boxes against each other and themselves, a region
+    whose walls are the sweep's own extreme offsets (every record on or inside a wall), the
+    test boxes, and fresh random boxes and regions."""
+    small, large = BOXES["small"], BOXES["large"]
+    offsets = authors_sweep(small).offsets
+    tight = Box("tight", tuple(offsets.min(axis=0)), tuple(offsets.max(axis=0)), (1, 1, 1))
+    yield from [(large, small), (small, small), (small, large), (small, tight)]
+    for box in TEST_BOXES[2:]:
+        yield box, small
+    for k in range(6):
+        yield random_box(rng, f"random{k}"), random_box(rng, f"region{k}")
+
+
+def probe_sweep_offsets_inside(fn, cases):
+    from dlo_course.database import Box as SandboxBox
+
+    out = []
+    for box, region in cases:
+        offsets, inside = fn(SandboxBox(*box), SandboxBox(*region))
+        out.append((np.asarray(offsets, dtype=np.float64), np.asarray(inside)))
+    return out
+
+
+@pytest.mark.exercise("sweep_offsets_inside", points=2,
+                      reference=("dlo_course.database.authors_sweep",
+                                 "dlo_course.database.Box.contains"))
+def test_sweep_offsets_inside(student):
+    rng = np.random.default_rng()  # fresh boxes at every grading
+    cases = list(sweep_cases(rng))
+    got = student.run(probe_sweep_offsets_inside,
+                      [(as_data(box), as_data(region)) for box, region in cases])
+    for (offsets, inside), (box, region) in zip(got, cases, strict=True):
+        where = f"the sweep of {box.name} {box.divisions} against {region.name}"
+        want = authors_sweep(box).offsets
+        assert len(want) == box.expected_count
+        assert offsets.shape == want.shape, f"{where}: offsets {offsets.shape}, expected {want.shape}"
+        np.testing.assert_allclose(offsets, want, rtol=0, atol=1e-12, err_msg=where)
+        assert inside.shape == (len(want),), f"{where}: inside has shape {inside.shape}"
+        # judged on the student's own offsets (equal to the library's to 1e-12), borders included
+        np.testing.assert_array_equal(inside.astype(bool), region.contains(offsets), err_msg=where)
+    assert [len(o) for o, _ in got[:2]] == [2651, 930]
+    assert got[3][1].all()  # every record of the small sweep lies in its own extreme offsets
+
+
+# ------------------------------------------------------------------ written answers
+
+
+@pytest.mark.exercise("prediction_inside", points=1)
+def test_prediction_inside(written_answer):
+    written_answer.check()

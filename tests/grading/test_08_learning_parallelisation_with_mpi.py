@@ -209,3 +209,11 @@ def test_sum_gradients_over_ranks(student, mpi_reference):
                 torch.testing.assert_close(a, b, rtol=1e-5, atol=1e-7, msg=lambda m: (
                     f"rank {rank}: {name} after {MPI_UPDATES} updates differs from the "
                     f"library's result: {m}"))
+
+
+# ------------------------------------------------------------------ written answers
+
+
+@pytest.mark.exercise("prediction_transitions", points=1)
+def test_prediction_transitions(written_answer):
+    written_answer.check()
