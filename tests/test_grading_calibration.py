@@ -56,10 +56,10 @@ def ring_buffer(kind: str, salt: int):
         def __len__(self):
             return self.size
 
-        def add(self, obs, act, rew, next_obs, done):
+        def add(self, obs, act, rew, next_obs, terminated, truncated):
             i = self.next
             self.obs[i], self.act[i], self.rew[i] = obs, act, rew
-            self.next_obs[i], self.done[i] = next_obs, float(done)
+            self.next_obs[i], self.done[i] = next_obs, float(terminated)
             self.next = (i + 1) % self.capacity
             self.size = min(self.size + 1, self.capacity)
 
@@ -90,7 +90,7 @@ def test_ring_buffer_checks_have_a_false_failure_rate_below_1e_6():
 
 @pytest.mark.parametrize("kind", ["integers", "choice", "floor", "legacy", "python", "torch"])
 def test_correct_ring_buffers_always_pass(kind):
-    want = T02.probe_ring_buffer(T02.ReplayBuffer)
+    want = T02.probe_ring_buffer(T02.LibraryRing)
     salts = range(25) if kind == "python" else range(100)
     for salt in salts:
         T02.check_ring_buffer(T02.probe_ring_buffer(ring_buffer(kind, salt)), want)
@@ -104,7 +104,7 @@ def test_a_biased_sampler_still_fails():
             return {name: getattr(self, name)[idx] for name in T02.FIELDS}
 
     with pytest.raises(AssertionError):
-        T02.check_ring_buffer(T02.probe_ring_buffer(Biased), T02.probe_ring_buffer(T02.ReplayBuffer))
+        T02.check_ring_buffer(T02.probe_ring_buffer(Biased), T02.probe_ring_buffer(T02.LibraryRing))
 
 
 # --------------------------------------------------------------------- build_mlp

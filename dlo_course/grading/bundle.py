@@ -13,11 +13,13 @@ the recorded value when it recognises the probe's inputs), in the bundle and, as
 without one where that is cheap: ``discounted_return`` on rewards drawn afresh at every
 grading, against the recursion that defines it (the return of no reward is 0, and that of
 ``r_k, r_k+1, ...`` is ``r_k`` plus gamma times that of ``r_k+1, ...``, on every suffix),
-which pins it down with no answer in the bundle. The others keep a recorded result, because
-every check that pins them down is their answer, written in the bundle's grader:
+which pins it down with no answer in the bundle; and the done flag that lesson 2's
+``RingBuffer.add`` stores from a step's ``terminated`` and ``truncated`` (once an exercise of
+its own, whose four possible inputs made its four recorded values the answer) against the
+library's ``ReplayBuffer`` fed what the trainer stores, on flags drawn afresh at every grading.
+The others keep a recorded result, because every check that pins them down is their answer,
+written in the bundle's grader:
 
-* ``stored_done(terminated, truncated)`` has four possible inputs: its four values are the
-  answer, and no fresh input can be drawn;
 * ``q_iteration_sweep``: on fresh inputs, the only exact check recomputes the sweep (the
   library's ``bellman_target`` on ``max_a' Q(s', a')``), which is the whole exercise; its
   properties (a done transition gives its reward, gamma = 0 the rewards) leave the greedy

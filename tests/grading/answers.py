@@ -22,11 +22,6 @@ def q_iteration_sweep(q, next_state, reward, done, gamma):
     return bellman_target(torch.as_tensor(reward), best_next, torch.as_tensor(done), gamma).numpy()
 
 
-def stored_done(terminated, truncated):
-    """What ReplayBuffer.add and trainer.run_episode store: termination only."""
-    return float(terminated)
-
-
 def pack_gradients(module):
     """(n,) float32: the trainable parameters' gradients in order, a missing one as zeros,
     as dlo_course.mpi.allreduce_gradients packs them."""
@@ -68,7 +63,6 @@ def recipes_differ(a, b):
 # answer -> (grading test file, the probe whose result on the answer the tests compare with)
 PROBES = {
     "q_iteration_sweep": ("test_01_rl_and_the_bellman_equation.py", "probe_q_iteration_sweep"),
-    "stored_done": ("test_02_experience_replay.py", "probe_stored_done"),
     "pack_gradients": ("test_08_learning_parallelisation_with_mpi.py", "probe_pack_gradients"),
     "mean_interval": ("test_11_reproducibility.py", "probe_mean_interval_fixed"),
     "mean_curve_with_band": ("test_11_reproducibility.py", "probe_mean_curve_with_band_fixed"),

@@ -102,3 +102,8 @@ def test_q_iteration_sweep(student):
         assert mine["q"].shape == ref["q"].shape
         np.testing.assert_allclose(mine["q"], ref["q"], rtol=1e-9, atol=1e-12)
         assert mine["q_kept"], "q must not be modified"
+
+
+@pytest.mark.exercise("prediction_sweeps", points=1)
+def test_prediction_sweeps(written_answer):
+    written_answer.check()

@@ -1,34 +1,33 @@
-"""Grading: lesson 2, experience replay (reference: dlo_course.replay_buffer.ReplayBuffer).
+"""Grading: lesson 2, experience replay (reference: dlo_course.replay_buffer.ReplayBuffer, fed
+the done flag dlo_course.trainer stores: ``terminated``).
 
-The statistical checks of ``RingBuffer.sample`` are calibrated: a correct uniform sampler
-fails them with a probability below 1e-9 (:func:`false_failure_bound`, checked by
-``tests/test_grading_calibration.py``), whatever generator it uses.
+``RingBuffer.add`` receives both flags of a step, ``terminated`` and ``truncated``, and decides
+what done flag to store; the flags of every transition are drawn afresh at each grading, so
+no recorded output can stand in for the decision. The statistical checks of
+``RingBuffer.sample`` are calibrated: a correct uniform sampler fails them with a probability
+below 1e-9 (:func:`false_failure_bound`, checked by ``tests/test_grading_calibration.py``),
+whatever generator it uses.
 """
 
 import math
-from pathlib import Path
+import random
 
 import numpy as np
 import pytest
 
-from dlo_course.grading.bundle import answer_result
 from dlo_course.replay_buffer import ReplayBuffer
 
 pytestmark = pytest.mark.notebook("02_experience_replay")
 
 FIELDS = ("obs", "act", "rew", "next_obs", "done")
-GRADING_DIR = Path(__file__).resolve().parent
 
 
-def probe_stored_done(fn):
-    cases = [(a, b) for a in (False, True) for b in (False, True)]
-    return [float(fn(a, b)) for a, b in cases] + [float(fn(np.bool_(True), np.bool_(False)))]
+class LibraryRing(ReplayBuffer):
+    """The library's buffer behind the exercise's interface: given both flags of a step, it
+    stores what ``dlo_course.trainer.run_episode`` passes to ``ReplayBuffer.add``."""
 
-
-@pytest.mark.exercise("stored_done", points=1, reference="dlo_course.trainer.run_episode")
-def test_stored_done(student):
-    assert student.run(probe_stored_done) == \
-        answer_result(GRADING_DIR, "stored_done", probe_stored_done)
+    def add(self, obs, act, rew, next_obs, terminated, truncated):
+        super().add(obs, act, rew, next_obs, terminated)
 
 
 # ------------------------------------------------------------------- RingBuffer
@@ -38,24 +37,38 @@ BATCH = 2000  # draws per case: enough to hit every stored row (see false_failur
 UNIFORM_ROWS, UNIFORM_DRAWS, UNIFORM_BAND = 4, 20_000, 400  # |count - 5000| < 400 per row
 
 
-def fill(buffers, start, stop, obs_dim, act_dim):
+def step_flags(seed, n):
+    """(terminated, truncated) of n transitions in a random order: the four combinations
+    once each (when n >= 4), the rest random; every other pair as NumPy booleans, as some
+    environments return them."""
+    rng = np.random.default_rng(seed)
+    flags = [(False, False), (True, False), (False, True), (True, True)]
+    flags += [(bool(a), bool(b)) for a, b in rng.random((max(n - 4, 0), 2)) < 0.4]
+    rng.shuffle(flags)
+    return [(np.bool_(a), np.bool_(b)) if k % 2 else (a, b) for k, (a, b) in enumerate(flags[:n])]
+
+
+def fill(buffers, start, stop, obs_dim, act_dim, flags=None):
     for i in range(start, stop):
+        terminated, truncated = flags[i] if flags else (i % 3 == 0, i % 4 == 3)
         for b in buffers:
             b.add(np.full(obs_dim, i, np.float32), np.full(act_dim, -i, np.float32), float(i),
-                  np.full(obs_dim, i + 0.5, np.float32), i % 3 == 0)
+                  np.full(obs_dim, i + 0.5, np.float32), terminated, truncated)
 
 
-def probe_ring_buffer(cls):
-    """What a RingBuffer class does: sizes, stored rows, samples (runs in the sandbox)."""
+def probe_ring_buffer(cls, seed=0):
+    """What a RingBuffer class does: sizes, stored rows, samples (runs in the sandbox). The
+    transitions' flags come from ``seed``."""
     cases = []
     for capacity, n in CASES:
         buffer = cls(4, 3, capacity, seed=0)
+        flags = step_flags(seed + capacity * 1000 + n, n)
         sizes = []
         for k in range(n):  # add one at a time, checking the size on the way
-            fill((buffer,), k, k + 1, 4, 3)
+            fill((buffer,), k, k + 1, 4, 3, flags)
             sizes.append(int(len(buffer)))
         batch = buffer.sample(BATCH)
-        cases.append({"sizes": sizes,
+        cases.append({"sizes": sizes, "terminated": [bool(a) for a, _ in flags],
                       "fields": {name: np.asarray(getattr(buffer, name)) for name in FIELDS},
                       "keys": sorted(str(k) for k in batch),
                       "batch": {name: np.asarray(batch[name]) for name in FIELDS if name in batch}})
@@ -80,6 +93,14 @@ def check_ring_buffer(got, want):
         for k, (size, ref_size) in enumerate(zip(mine["sizes"], ref["sizes"], strict=True)):
             assert size == ref_size, f"len {size} after {k + 1} adds with capacity " \
                                      f"{capacity}, expected {ref_size}"
+        stored, ref_stored = mine["fields"]["done"], ref["fields"]["done"]
+        if stored.shape == ref_stored.shape and not np.array_equal(stored, ref_stored):
+            rows = [k for k in range(len(stored)) if stored[k] != ref_stored[k]][:5]
+            raise AssertionError(
+                f"done {where}: rows {rows} hold {stored[rows].tolist()}, expected "
+                f"{ref_stored[rows].tolist()}. Store d = 1.0 only for a transition that "
+                f"terminated: a truncated one (cut by a time limit) still has a future, "
+                f"and its Bellman target must keep bootstrapping")
         for name in FIELDS:  # same rows in the same places as the library's ring
             np.testing.assert_array_equal(mine["fields"][name], ref["fields"][name],
                                           err_msg=f"{name} {where}")
@@ -95,7 +116,9 @@ def check_ring_buffer(got, want):
         np.testing.assert_array_equal(batch["obs"][:, 0], i)
         np.testing.assert_array_equal(batch["act"][:, 0], -i)
         np.testing.assert_array_equal(batch["next_obs"][:, 0], i + 0.5)
-        np.testing.assert_array_equal(batch["done"], (i % 3 == 0).astype(np.float32))
+        terminated = np.asarray(ref["terminated"], dtype=np.float32)
+        np.testing.assert_array_equal(batch["done"], terminated[i.astype(int)],
+                                      err_msg="a sampled row's done is not its transition's")
         kept = set(range(max(0, n - capacity), n))  # only the last `capacity` transitions
         drawn = set(i.astype(int).tolist())
         assert drawn <= kept, f"sampled a transition that is not stored ({where})"
@@ -132,6 +155,12 @@ def false_failure_bound():
     return bound
 
 
-@pytest.mark.exercise("RingBuffer", points=3, reference="dlo_course.replay_buffer.ReplayBuffer")
+@pytest.mark.exercise("RingBuffer", points=4, reference="dlo_course.replay_buffer.ReplayBuffer")
 def test_ring_buffer(student):
-    check_ring_buffer(student.run(probe_ring_buffer), probe_ring_buffer(ReplayBuffer))
+    seed = random.SystemRandom().randrange(2**31)
+    check_ring_buffer(student.run(probe_ring_buffer, seed), probe_ring_buffer(LibraryRing, seed))
+
+
+@pytest.mark.exercise("prediction_ring", points=1)
+def test_prediction_ring(written_answer):
+    written_answer.check()

@@ -1,5 +1,7 @@
 """Grading: lesson 3, actor and critic (reference: dlo_course.ddpg.mlp, Actor, Critic)."""
 
+import random
+
 import numpy as np
 import pytest
 import torch
@@ -91,24 +93,62 @@ def test_squash_action(student):
         torch.testing.assert_close(mine.float(), ref)
 
 
-def critics():
-    torch.manual_seed(4)
-    for obs_dim, act_dim in [(30, 3), (3, 1)]:
-        critic = Critic(obs_dim, act_dim, hidden_sizes=(32, 32), final_init=0.5)
-        yield critic, torch.randn(17, obs_dim), torch.randn(17, act_dim)
+CRITIC_CASES = [(30, 3, (256, 256, 256), 3e-3), (3, 1, (32, 32), 0.5), (5, 2, (16,), 0.1)]
 
 
-def probe_critic_value(fn):
-    return [torch.as_tensor(fn(critic.net, obs, act)) for critic, obs, act in critics()]
-
-
-@pytest.mark.exercise("critic_value", points=1, reference="dlo_course.ddpg.Critic.forward")
-def test_critic_value(student):
-    got = student.run(probe_critic_value)
-    for mine, (critic, obs, act) in zip(got, critics(), strict=True):
-        assert tuple(mine.shape) == (17, 1), f"shape {tuple(mine.shape)}, expected (17, 1)"
+def probe_critic(cls, seed):
+    """Per case: the critic as built (its parameters), then, with weights drawn from ``seed``
+    (by shape, in order), its Q-values on fresh inputs and their gradient with respect to
+    the action."""
+    gen = torch.Generator().manual_seed(seed)
+    out = []
+    for obs_dim, act_dim, hidden, final_init in CRITIC_CASES:
+        torch.manual_seed(seed % 1000)
+        critic = cls(obs_dim, act_dim, hidden, final_init)
+        built = [p.detach().clone() for p in critic.parameters()]
         with torch.no_grad():
-            torch.testing.assert_close(mine, critic(obs, act))
+            for p in critic.parameters():
+                p.copy_(torch.randn(p.shape, generator=gen) * 0.5)
+        obs = torch.randn(23, obs_dim, generator=gen) * 2
+        act = (torch.rand(23, act_dim, generator=gen) * 2 - 1).requires_grad_(True)
+        q = torch.as_tensor(critic(obs, act))
+        grad = None
+        if q.requires_grad:
+            (grad,) = torch.autograd.grad(q.sum(), act, allow_unused=True)
+        out.append({"module": isinstance(critic, nn.Module), "params": built,
+                    "q": q.detach(), "grad": grad})
+    return out
+
+
+@pytest.mark.exercise("Critic", points=2, reference="dlo_course.ddpg.Critic")
+def test_critic(student):
+    """The student's critic against the library's: same layers, same last-layer
+    initialisation, and, given the same weights, the same Q-values and the same gradient
+    with respect to the action, on weights and inputs drawn at every grading."""
+    seed = random.SystemRandom().randrange(2**31)
+    got = student.run(probe_critic, seed)
+    want = probe_critic(Critic, seed)
+    for (obs_dim, act_dim, hidden, final_init), mine, ref in zip(CRITIC_CASES, got, want,
+                                                                   strict=True):
+        where = f"Critic({obs_dim}, {act_dim}, {hidden}, {final_init})"
+        assert mine["module"], f"{where} must be an nn.Module"
+        assert [tuple(p.shape) for p in mine["params"]] == \
+            [tuple(p.shape) for p in ref["params"]], \
+            f"{where}: the layers differ from the library's MLP on obs_dim + act_dim = " \
+            f"{obs_dim + act_dim} inputs with one output: {[tuple(p.shape) for p in mine['params']]}"
+        pooled = torch.cat([p.reshape(-1) for p in mine["params"][-2:]])
+        assert pooled.abs().max().item() <= final_init + 1e-9 and pooled.unique().numel() > 1, \
+            f"{where}: the output layer is not initialised uniformly in +-final_init"
+        assert tuple(mine["q"].shape) == (23, 1), \
+            f"{where}: Q-values of shape {tuple(mine['q'].shape)} for a batch of 23, expected (23, 1)"
+        torch.testing.assert_close(
+            mine["q"], ref["q"], rtol=1e-5, atol=1e-5,
+            msg=lambda m: f"{where}: with the library's weights, other Q-values (is the "
+                          f"observation first in the concatenation?): {m}")
+        assert mine["grad"] is not None, \
+            f"{where}: no gradient of Q reaches the action; the actor learns through dQ/da"
+        torch.testing.assert_close(mine["grad"], ref["grad"], rtol=1e-5, atol=1e-5,
+                                   msg=lambda m: f"{where}: dQ/da differs: {m}")
 
 
 COUNT_CASES = [(18, 3, (256, 256, 256)), (30, 3, (256, 256, 256)), (42, 3, (256, 256, 256)),
@@ -131,3 +171,8 @@ def test_parameter_counts(student):
     want = probe_parameter_counts(reference_parameter_counts)
     for case, mine, ref in zip(COUNT_CASES, got, want, strict=True):
         assert mine == ref, f"{mine} for {case}, expected {ref}"
+
+
+@pytest.mark.exercise("prediction_parameters", points=1)
+def test_prediction_parameters(written_answer):
+    written_answer.check()

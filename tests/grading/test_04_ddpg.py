@@ -1,6 +1,7 @@
 """Grading: lesson 4, DDPG (reference: dlo_course.ddpg, dlo_course.noise.OUNoise)."""
 
 import copy
+import random
 
 import numpy as np
 import pytest
@@ -20,11 +21,11 @@ def q_and_target(seed, batch=32):
 
 
 def probe_loss(fn, batch):
-    """Value and gradient (w.r.t. q) of a loss of q (and a target) for three seeds."""
+    """Value and gradient (w.r.t. q) of a loss of q and a target for three seeds."""
     out = []
     for seed in range(3):
         q, target = q_and_target(seed, batch)
-        loss = fn(q, target.clone()) if batch == 32 else fn(q)
+        loss = fn(q, target.clone())
         loss = torch.as_tensor(loss)
         (grad,) = torch.autograd.grad(loss, q) if loss.requires_grad else (None,)
         out.append({"loss": loss.detach(), "grad": grad})
@@ -72,15 +73,6 @@ def test_critic_loss_refuses_mismatched_shapes(student):
     assert raised == ["ValueError", "ValueError"], \
         f"shapes (B, 1) and (B,) must raise ValueError (raised: {raised}); broadcasting them " \
         f"would compare every Q with every target"
-
-
-def probe_policy_loss(fn):
-    return probe_loss(fn, 17)
-
-
-@pytest.mark.exercise("policy_loss", points=1, reference="dlo_course.ddpg.policy_loss")
-def test_policy_loss(student):
-    check_loss(student.run(probe_policy_loss), probe_policy_loss(ddpg.policy_loss))
 
 
 POLYAK_CASES = [(0.01, False), (0.3, True), (1.0, False)]  # (tau, target requires grad)
@@ -162,10 +154,10 @@ NETS = ("actor", "critic", "actor_target", "critic_target")
 UPDATES = 3  # consecutive updates: the optimisers' state must carry over too
 
 
-def update_agent():
+def update_agent(seed):
     """A small agent of the paper's kind whose targets trail its networks (as after some
     training), so that using the networks instead of the targets shows."""
-    torch.manual_seed(41)
+    torch.manual_seed(seed)
     agent = ddpg.DDPG(5, 2, -1.0, 1.0, DDPGConfig(hidden_sizes=(16, 16), tau=0.1,
                                                         gamma=0.9))
     with torch.no_grad():
@@ -175,9 +167,9 @@ def update_agent():
     return agent
 
 
-def update_batch(k, size=12):
+def update_batch(seed, k, size=12):
     """Batch k: float32 tensors, rew and done of shape (B, 1), a quarter of them terminal."""
-    gen = torch.Generator().manual_seed(40 + k)
+    gen = torch.Generator().manual_seed(seed + 1 + k)
     return {"obs": torch.randn(size, 5, generator=gen),
             "act": torch.rand(size, 2, generator=gen) * 2 - 1,
             "rew": torch.randn(size, 1, generator=gen),
@@ -185,13 +177,14 @@ def update_batch(k, size=12):
             "done": (torch.arange(size) % 4 == 0).float().reshape(size, 1)}
 
 
-def probe_ddpg_update(fn):
+def probe_ddpg_update(fn, seed=41):
     """After each of UPDATES calls fn(agent, batch): every network's parameters, the
-    gradients left on the critic and the actor, and whether the critic is trainable again."""
-    agent = update_agent()
+    gradients left on the critic and the actor, and whether the critic is trainable again.
+    The agent's weights and the batches come from ``seed``."""
+    agent = update_agent(seed)
     steps = []
     for k in range(UPDATES):
-        fn(agent, update_batch(k))
+        fn(agent, update_batch(seed, k))
 
         def grads(net):
             return [None if p.grad is None else p.grad.detach().clone()
@@ -214,8 +207,9 @@ UPDATE_HINTS = {  # what a difference in each place usually means
               "target networks, without gradient; the critic steps before the actor)",
     "critic_grads": "the critic's gradients after the update are not those of its own loss: "
                     "freeze the critic (requires_grad_(False)) during the actor step",
-    "actor": "the actor step (-mean Q(s, mu(s)) on the critic just updated)",
-    "actor_grads": "the actor's gradients (-mean Q(s, mu(s)), after the critic step)",
+    "actor": "the actor step (the policy loss -mean Q(s, mu(s)) on the critic just updated)",
+    "actor_grads": "the actor's gradients: those of the policy loss -mean Q(s, mu(s)) (minus "
+                   "sign, mean over the batch), after the critic step",
     "actor_target": "the soft update of the actor's target",
     "critic_target": "the soft update of the critic's target",
 }
@@ -228,14 +222,15 @@ def assert_tensors_close(mine, ref, what):
         torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-6, msg=lambda m: f"{what}: {m}")
 
 
-@pytest.mark.exercise("ddpg_update", points=3,
+@pytest.mark.exercise("ddpg_update", points=4,
                       reference=("dlo_course.ddpg.DDPG.update", "dlo_course.ddpg.DDPG.target_value",
                                  "dlo_course.ddpg.DDPG._step", "dlo_course.ddpg.bellman_target",
                                  "dlo_course.ddpg.critic_loss", "dlo_course.ddpg.policy_loss",
                                  "dlo_course.ddpg.polyak_update"))
 def test_ddpg_update(student):
-    got = student.run(probe_ddpg_update)
-    want = probe_ddpg_update(library_update)
+    seed = random.SystemRandom().randrange(2**31)  # fresh weights and batches at every grading
+    got = student.run(probe_ddpg_update, seed)
+    want = probe_ddpg_update(library_update, seed)
     assert len(got) == UPDATES
     for k, (mine, ref) in enumerate(zip(got, want, strict=True), start=1):
         for name in ("critic", "critic_grads", "actor", "actor_grads", "actor_target",
@@ -247,3 +242,8 @@ def test_ddpg_update(student):
                 assert_tensors_close(mine["nets"][name], ref["nets"][name], where)
         assert mine["critic_trainable"], \
             f"after update {k} the critic is still frozen: unfreeze it after the actor step"
+
+
+@pytest.mark.exercise("prediction_actor", points=1)
+def test_prediction_actor(written_answer):
+    written_answer.check()
