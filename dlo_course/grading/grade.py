@@ -15,7 +15,11 @@ from typing import Any, Iterable
 
 from dlo_course.grading.feedback import feedback_markdown, rubric_summary
 from dlo_course.grading.notebooks import GRADING_TESTS_DIR, SOLUTIONS_DIR, exercises
+from dlo_course.grading.runner import ExerciseError, find_notebook
 from dlo_course.paths import REPO_ROOT
+from dlo_course.submission import CSV_COLUMNS, SUBMISSION_DIR, csv_fields
+
+OWN_AGENT_ITEM, OWN_AGENT_NOTEBOOK = "own_agent_report", "13_capstone_table_one"
 
 
 def grading_command(notebooks: str | Path, tests: str | Path = GRADING_TESTS_DIR,
@@ -68,7 +72,10 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     Each sub-folder of ``submissions`` is one student (its name is the student's id) and holds
     that student's notebooks. Columns: ``student``, one column of points per exercise and
     written answer (in the order of the course), ``total``, ``max_total``, ``error`` (empty
-    when grading ran), then one column ``<answer>_text`` per written answer holding what the
+    when grading ran), the student's own agent as handed in with lesson 13
+    (:data:`dlo_course.submission.CSV_COLUMNS`: the done % its report claims, whether the
+    grader's evaluation verified it, the run's transitions and episodes; empty when absent),
+    then one column ``<answer>_text`` per written answer holding what the
     student wrote, verbatim, each followed by ``<answer>_rubric``: the criteria of its rubric
     met, e.g. ``1/2 met; missing: gives a reason`` (empty without a rubric).
 
@@ -122,6 +129,7 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
                     if "text" in e})
         row.update({f"{e['exercise']}_rubric": rubric_summary(e["rubric"])
                     for e in report["exercises"] if "rubric" in e})
+        row.update(_own_agent_fields(student, report))
         rows.append(row)
         (feedback / f"{student.name}.md").write_text(
             feedback_markdown(student.name, report, known, max_total), encoding="utf-8")
@@ -129,13 +137,26 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     text_columns = [f"{name}_{part}" for name in texts for part in ("text", "rubric")]
     with out.open("w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, fieldnames=["student", *columns, "total", "max_total",
-                                               "error", *text_columns])
+                                               "error", *CSV_COLUMNS, *text_columns])
         writer.writeheader()
         for row in rows:
             writer.writerow({c: row.get(c, 0) for c in columns}
                             | {c: row.get(c, "") for c in text_columns}
-                            | {k: row[k] for k in ("student", "total", "max_total", "error")})
+                            | {k: row[k] for k in ("student", "total", "max_total", "error")}
+                            | {c: row.get(c, "") for c in CSV_COLUMNS})
     return rows
+
+
+def _own_agent_fields(student: Path, report: dict[str, Any]) -> dict[str, Any]:
+    """The class CSV's columns of a student's handed-in agent (:func:`csv_fields`), verified
+    when the grader gave ``own_agent_report`` its points."""
+    graded = [e for e in report["exercises"] if e["exercise"] == OWN_AGENT_ITEM]
+    verified = None if not graded else all(e["earned"] == e["points"] for e in graded)
+    try:
+        folder = find_notebook(student, OWN_AGENT_NOTEBOOK).parent / SUBMISSION_DIR
+    except ExerciseError:
+        folder = None
+    return csv_fields(folder, verified)
 
 
 def summary_lines(items: Iterable[dict[str, Any]]) -> list[str]:

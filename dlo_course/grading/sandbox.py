@@ -307,23 +307,29 @@ class Sandbox:
             raise SandboxError(f"the grading sandbox stopped answering\n{tail}")
         return json.loads(line)
 
-    def run(self, notebook: str | Path, exercise: str, probe_file: str | Path, probe: str,
-            args: tuple = (), references: Iterable[str] = ()) -> dict[str, Any]:
+    def run(self, notebook: str | Path | None, exercise: str, probe_file: str | Path,
+            probe: str, args: tuple = (), references: Iterable[str] = (),
+            timeout: float | None = None) -> dict[str, Any]:
         """Run ``probe(obj, *args)`` in a fresh worker, ``obj`` being what the exercise cell
-        of ``notebook`` defines. Returns ``status`` ("ok", "not loaded", "error", "timeout",
-        "killed", "exited"), ``value`` (decoded data, if ok), ``message`` and ``output``
-        (what the worker printed)."""
+        of ``notebook`` defines (``notebook`` None: ``probe(None, *args)``, no student code
+        run, e.g. to evaluate an actor file handed in, passed as bytes), within ``timeout``
+        seconds (default: the sandbox's). Returns ``status`` ("ok", "not loaded", "error",
+        "timeout", "killed", "exited"), ``value`` (decoded data, if ok), ``message`` and
+        ``output`` (what the worker printed)."""
+        timeout = self.timeout if timeout is None else float(timeout)
         if self._proc is None or self._proc.poll() is not None:
             self._start()
         self._count += 1
         scratch = self.root / f"scratch{self._count:04d}"
         scratch.mkdir()
-        copy_path = scratch / Path(notebook).name
-        copy_path.write_bytes(Path(notebook).read_bytes())
-        request = {"scratch": str(scratch), "notebook": str(copy_path), "exercise": exercise,
+        copy_path = None if notebook is None else scratch / Path(notebook).name
+        if copy_path is not None:
+            copy_path.write_bytes(Path(notebook).read_bytes())
+        request = {"scratch": str(scratch), "notebook": copy_path and str(copy_path),
+                   "exercise": exercise,
                    "probe_file": str(Path(probe_file).resolve()), "probe": probe,
                    "args": encode_data(tuple(args)), "references": list(references),
-                   "timeout": self.timeout, "memory_mb": self.memory_mb}
+                   "timeout": timeout, "memory_mb": self.memory_mb}
         assert self._proc is not None and self._proc.stdin is not None
         try:
             self._proc.stdin.write((json.dumps(request) + "\n").encode())
@@ -331,7 +337,7 @@ class Sandbox:
         except OSError as err:
             self.close()
             raise SandboxError(f"the grading sandbox is gone: {err}") from err
-        reply = self._read(self.timeout + 60)
+        reply = self._read(timeout + 60)
         output = ""
         log = Path(reply["log"])
         if log.is_file():
@@ -340,7 +346,7 @@ class Sandbox:
                                   "message": ""}
         path = Path(reply["result"])
         if reply["status"] == "timeout":
-            result["message"] = f"the exercise ran longer than its time limit ({self.timeout:g} s)"
+            result["message"] = f"the exercise ran longer than its time limit ({timeout:g} s)"
         elif path.is_file() and path.stat().st_size and reply["status"] == "exited":
             read_result(path.read_text(), result)
         else:

@@ -290,6 +290,47 @@ def mpi_reference():
     return run
 
 
+@pytest.fixture
+def data_probe():
+    """``data_probe(probe, *args, timeout=None)``: ``probe(None, *args)`` in a sandbox worker
+    that runs no cell of the student's notebook, for what a student handed in as data (e.g.
+    an actor file's bytes, evaluated again): nothing of theirs runs in the grader's process,
+    and no code of theirs runs beside the probe. ``timeout``: seconds (default: an
+    exercise's). Fails the test if the worker does not return."""
+    def run(probe, *args, timeout: float | None = None):
+        import inspect
+
+        from dlo_course.grading.sandbox import SandboxError
+
+        try:
+            result = sandbox().run(None, "", inspect.getfile(probe), probe.__qualname__, args,
+                                   timeout=timeout)
+        except SandboxError as err:
+            result = {"status": "error", "message": str(err), "output": ""}
+        if result["status"] != "ok":
+            output = result.get("output", "").strip()
+            printed = f"\n--- what it printed ---\n{output[-3000:]}" if output else ""
+            pytest.fail(f"{probe.__name__} ({result['status']}):\n{result['message']}"
+                        f"{printed}", pytrace=False)
+        return result["value"]
+
+    return run
+
+
+@pytest.fixture
+def notebook_folder(request) -> Path:
+    """The folder of the graded notebook (the test's ``notebook`` marker) in the student's
+    hand-in, where files handed in beside it are found. Fails the test if the notebook is
+    missing."""
+    from dlo_course.grading.runner import ExerciseError, find_notebook
+
+    notebook = request.node.get_closest_marker("notebook").args[0]
+    try:
+        return find_notebook(notebooks_dir(request.config), notebook).parent
+    except (ExerciseError, OSError) as err:
+        pytest.fail(str(err), pytrace=False)
+
+
 def load_student(config, notebook: str, name: str, references=()) -> Student:
     """The student's exercise ``name`` of ``notebook``, checked without running it: the cell
     exists and does its own work (no delegation to the library). Fails the test otherwise."""

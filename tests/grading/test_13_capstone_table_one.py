@@ -1,12 +1,15 @@
-"""Grading: lesson 13, the capstone on Table I (references: dlo_course.evaluation.wilson_interval,
-dlo_course.reproduce.verdict).
+"""Grading: lesson 13, the capstone on Table I (reference: dlo_course.reproduce.verdict; the
+student's own agent: dlo_course.submission).
 
-``done_interval`` is compared with the library's Wilson interval on done % values as the
-reproduction's CSV stores them (rounded to 6 significant digits), ``paper_verdict`` with the
-library's verdict on values that sit exactly on the ends of an interval, and
-``count_not_worse`` with a count made here from the library's verdicts, on rows where
-counting the wrong verdicts gives another number. The written answers (Markdown cells) are
-never run: they score for presence and length, and their text goes to the instructor.
+``count_not_worse`` is compared with a count made here from the library's verdicts (the
+interval from the notebook's setup cell, the library's Wilson interval in percent), on rows
+where counting the wrong verdicts, or leaving the interval's ends out of it, gives another
+number. ``own_agent_report`` reads the folder handed in beside the notebook
+(``13_submission/``: an actor file and the report of the graded protocol), evaluates that
+actor again in a sandbox worker that runs none of the student's code, and gives the points
+only if the report says what the actor does (:func:`dlo_course.submission.report_problems`).
+The written answers (Markdown cells) are never run: they score for presence, length and
+their rubric, and their text goes to the instructor.
 
 The probes below run in the grading sandbox, the checks here.
 """
@@ -18,51 +21,10 @@ from dlo_course.reproduce import verdict
 
 pytestmark = pytest.mark.notebook("13_capstone_table_one")
 
-# (done %, episodes) as the CSV writes them: 0 and 100 %, thirds, the paper's 1000 episodes
-INTERVAL_CASES = [(40.0, 20), (5.0, 20), (0.0, 20), (100.0, 100), (87.0, 100),
-                  (33.3333, 3), (66.6667, 3), (99.5, 1000), (57.0, 100), (100.0, 1), (0.0, 1)]
-
 
 def library_interval(done_percent, episodes, z=1.959964):
     successes = round(done_percent * episodes / 100)
     return tuple(100 * x for x in wilson_interval(successes, episodes, z=z))
-
-
-def probe_done_interval(fn, cases):
-    return {"intervals": [tuple(float(x) for x in fn(p, n)) for p, n in cases],
-            "z": tuple(float(x) for x in fn(35.0, 20, z=2.576))}
-
-
-@pytest.mark.exercise("done_interval", points=2,
-                      reference="dlo_course.evaluation.wilson_interval")
-def test_done_interval(student):
-    got = student.run(probe_done_interval, INTERVAL_CASES)
-    for (p, n), interval in zip(INTERVAL_CASES, got["intervals"], strict=True):
-        want = library_interval(p, n)
-        assert interval == pytest.approx(want, rel=1e-9, abs=1e-9), (
-            f"done {p}% of {n} episodes: {interval}, expected {want} (percent, Wilson, "
-            f"successes = round(done % x episodes / 100))")
-    assert got["z"] == pytest.approx(library_interval(35.0, 20, z=2.576), rel=1e-9), \
-        "the z argument must set the interval's width"
-
-
-# (paper done %, low, high): on each side, inside, and exactly on both ends
-VERDICT_CASES = [(99.5, 21.9, 61.3), (13.9, 0.0, 16.1), (70.0, 79.0, 92.2), (99.1, 96.3, 100.0),
-                 (96.3, 96.3, 100.0), (100.0, 96.3, 100.0), (0.0, 0.0, 16.1),
-                 (16.1, 0.0, 16.1), (16.2, 0.0, 16.1), (78.9, 79.0, 92.2)]
-
-
-def probe_paper_verdict(fn, cases):
-    return [str(fn(paper, low, high)) for paper, low, high in cases]
-
-
-@pytest.mark.exercise("paper_verdict", points=1, reference="dlo_course.reproduce.verdict")
-def test_paper_verdict(student):
-    got = student.run(probe_paper_verdict, VERDICT_CASES)
-    for (paper, low, high), mine in zip(VERDICT_CASES, got, strict=True):
-        want = verdict({"done_ci_low": low, "done_ci_high": high}, paper)
-        assert mine == want, f"paper {paper}%, our interval [{low}, {high}]: {mine!r}, " \
-                             f"expected {want!r}"
 
 
 def count_rows():
@@ -96,9 +58,7 @@ def probe_count_not_worse(fn, rows):
     return [int(everything), int(every_other), int(nothing)]
 
 
-@pytest.mark.exercise("count_not_worse", points=2,
-                      reference=("dlo_course.evaluation.wilson_interval",
-                                 "dlo_course.reproduce.verdict"))
+@pytest.mark.exercise("count_not_worse", points=3, reference="dlo_course.reproduce.verdict")
 def test_count_not_worse(student):
     rows = count_rows()
     found = check_verdicts(rows)
@@ -131,3 +91,50 @@ def test_analysis_comparison(written_answer):
 @pytest.mark.exercise("analysis_next_step", points=1)
 def test_analysis_next_step(written_answer):
     written_answer.check()
+
+
+# ------------------------------------------------------------------ the student's own agent
+
+# One evaluation of the graded protocol: about 8 s of CPU for an actor that never reaches a
+# goal (every episode runs all its actions), several times that on a busy machine; its own
+# limit, whatever DLO_COURSE_GRADING_TIMEOUT gives an exercise.
+REEVALUATION_TIMEOUT = 150.0
+
+
+def probe_reevaluate(_, actor_bytes):
+    """In a sandbox worker that runs none of the student's code: the handed-in actor file
+    (loaded with weights_only=True) on the graded protocol, as the library measures it."""
+    from pathlib import Path
+
+    from dlo_course.submission import evaluate_graded
+
+    path = Path("handed_in_actor.pt")  # in the worker's scratch folder
+    path.write_bytes(actor_bytes)
+    return evaluate_graded(path)
+
+
+def shipped_actor_digests():
+    from dlo_course.paths import AGENTS_DIR
+    from dlo_course.submission import ACTOR_NAME, sha256_of
+
+    return tuple(sha256_of(p) for p in sorted(AGENTS_DIR.glob(f"nodes*/{ACTOR_NAME}")))
+
+
+@pytest.mark.timeout(REEVALUATION_TIMEOUT + 240)
+@pytest.mark.exercise("own_agent_report", points=2)
+def test_own_agent_report(notebook_folder, data_probe):
+    from dlo_course.submission import (SUBMISSION_DIR, SubmissionError, read_submission,
+                                       report_problems)
+
+    try:
+        report, actor_bytes = read_submission(notebook_folder / SUBMISSION_DIR)
+    except SubmissionError as err:
+        pytest.fail(f"own_agent_report: {err}", pytrace=False)
+    forbidden = shipped_actor_digests()
+    problems = report_problems(report, actor_bytes, None, forbidden)  # before any simulation
+    if not problems:
+        measured = data_probe(probe_reevaluate, actor_bytes,
+                              timeout=REEVALUATION_TIMEOUT)
+        problems = report_problems(report, actor_bytes, measured, forbidden)
+    assert not problems, ("own_agent_report: the report does not describe the handed-in "
+                          "actor:\n- " + "\n- ".join(problems))
