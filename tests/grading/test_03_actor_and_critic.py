@@ -141,13 +141,16 @@ def test_critic(student):
             f"{where}: the output layer is not initialised uniformly in +-final_init"
         assert tuple(mine["q"].shape) == (23, 1), \
             f"{where}: Q-values of shape {tuple(mine['q'].shape)} for a batch of 23, expected (23, 1)"
+        # float32 sums in another order (another correct layout) differ in the last bits of
+        # the largest values: the tolerances scale with them
         torch.testing.assert_close(
-            mine["q"], ref["q"], rtol=1e-5, atol=1e-5,
+            mine["q"], ref["q"], rtol=1e-4, atol=1e-5 * float(ref["q"].abs().max()) + 1e-6,
             msg=lambda m: f"{where}: with the library's weights, other Q-values (is the "
                           f"observation first in the concatenation?): {m}")
         assert mine["grad"] is not None, \
             f"{where}: no gradient of Q reaches the action; the actor learns through dQ/da"
-        torch.testing.assert_close(mine["grad"], ref["grad"], rtol=1e-5, atol=1e-5,
+        torch.testing.assert_close(mine["grad"], ref["grad"], rtol=1e-4,
+                                   atol=1e-5 * float(ref["grad"].abs().max()) + 1e-6,
                                    msg=lambda m: f"{where}: dQ/da differs: {m}")
 
 
