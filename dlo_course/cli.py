@@ -648,10 +648,13 @@ def course_release(solutions: Path | None, lessons: Path | None, check: bool,
               help="Seconds allowed for one student's whole grading run.")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True,
               help="Students graded at the same time (one per core is about right).")
+@click.option("--leaderboard", type=click.Path(dir_okay=False, path_type=Path), default=None,
+              help="Also write a Markdown table of the students' own agents (lesson 13), "
+                   "verified done % first.")
 def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: float,
-                 jobs: int) -> None:
+                 jobs: int, leaderboard: Path | None) -> None:
     """Grade SUBMISSIONS/<student>/ notebook folders; one CSV row of points per student."""
-    from dlo_course.grading.grade import grade
+    from dlo_course.grading.grade import grade, leaderboard_markdown
     from dlo_course.grading.notebooks import GRADING_TESTS_DIR
 
     try:
@@ -665,6 +668,10 @@ def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: floa
     feedback = out.parent / f"{out.stem}_feedback"
     click.echo(f"wrote {out} (the grader's output for each student: {logs}; a feedback sheet "
                f"for each student: {feedback})")
+    if leaderboard is not None:
+        leaderboard.parent.mkdir(parents=True, exist_ok=True)
+        leaderboard.write_text(leaderboard_markdown(rows), encoding="utf-8")
+        click.echo(f"wrote {leaderboard}")
 
 
 @course_group.command("rubrics")

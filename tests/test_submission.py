@@ -16,7 +16,7 @@ import torch
 
 from dlo_course import submission
 from dlo_course.ddpg import Actor, save_network
-from dlo_course.grading.grade import grade
+from dlo_course.grading.grade import grade, leaderboard_markdown
 from dlo_course.grading.notebooks import GRADING_TESTS_DIR
 from dlo_course.paths import AGENTS_DIR, REPO_ROOT
 from dlo_course.rundir import read_progress
@@ -133,8 +133,8 @@ def test_the_grader_evaluates_the_actor_again_and_fills_the_class_csv(handed_in,
     fresh_actor(students / "swapped" / folder.name / submission.ACTOR_NAME, seed=15)
 
     out = tmp_path / "grades.csv"
-    grade(students, out, GRADING_TESTS_DIR / f"test_{CAPSTONE}.py", catalog=catalog,
-          progress=False)
+    graded = grade(students, out, GRADING_TESTS_DIR / f"test_{CAPSTONE}.py", catalog=catalog,
+                   progress=False)
     with out.open(newline="", encoding="utf-8") as f:
         rows = {row["student"]: row for row in csv.DictReader(f)}
     assert {name: float(row["own_agent_report"]) for name, row in rows.items()} == {
@@ -148,3 +148,18 @@ def test_the_grader_evaluates_the_actor_again_and_fills_the_class_csv(handed_in,
     feedback = tmp_path / "grades_feedback"
     assert "the grader measured" in (feedback / "edited.md").read_text()
     assert "another actor file" in (feedback / "swapped.md").read_text()
+    board = leaderboard_markdown(graded).splitlines()
+    assert [line.split(" | ")[1] for line in board[2:]] == ["honest", "edited", "swapped"]
+    assert board[2].split(" | ")[3] == "yes" and board[3].split(" | ")[3] == "no"
+
+
+def test_the_leaderboard_puts_verified_claims_first():
+    rows = [{"student": "ann", "claimed_done_percent": 100.0, "done_verified": 0},
+            {"student": "bea", "claimed_done_percent": 50.0, "done_verified": 1},
+            {"student": "cy", "claimed_done_percent": "", "done_verified": 0},
+            {"student": "dan", "claimed_done_percent": 75.0, "done_verified": 1,
+             "run_transitions": 9000, "run_episodes": 150}]
+    board = leaderboard_markdown(rows).splitlines()
+    assert [line.split(" | ")[1] for line in board[2:]] == ["dan", "bea", "ann", "cy"]
+    assert board[2] == "| 1 | dan | 75 | yes | 9000 | 150 |"
+    assert board[5] == "| 4 | cy |  | no |  |  |"

@@ -72,9 +72,10 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     Each sub-folder of ``submissions`` is one student (its name is the student's id) and holds
     that student's notebooks. Columns: ``student``, one column of points per exercise and
     written answer (in the order of the course), ``total``, ``max_total``, ``error`` (empty
-    when grading ran), the student's own agent as handed in with lesson 13
-    (:data:`dlo_course.submission.CSV_COLUMNS`: the done % its report claims, whether the
-    grader's evaluation verified it, the run's transitions and episodes; empty when absent),
+    when grading ran), the student's own agent as handed in with lesson 13, when it is
+    graded (:data:`dlo_course.submission.CSV_COLUMNS`: the done % its report claims, whether
+    the grader's evaluation verified it, the run's transitions and episodes; empty when
+    absent),
     then one column ``<answer>_text`` per written answer holding what the
     student wrote, verbatim, each followed by ``<answer>_rubric``: the criteria of its rubric
     met, e.g. ``1/2 met; missing: gives a reason`` (empty without a rubric).
@@ -135,15 +136,16 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
             feedback_markdown(student.name, report, known, max_total), encoding="utf-8")
     out.parent.mkdir(parents=True, exist_ok=True)
     text_columns = [f"{name}_{part}" for name in texts for part in ("text", "rubric")]
+    own_columns = list(CSV_COLUMNS) if OWN_AGENT_ITEM in columns else []  # lesson 13 graded
     with out.open("w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, fieldnames=["student", *columns, "total", "max_total",
-                                               "error", *CSV_COLUMNS, *text_columns])
+                                               "error", *own_columns, *text_columns])
         writer.writeheader()
         for row in rows:
             writer.writerow({c: row.get(c, 0) for c in columns}
                             | {c: row.get(c, "") for c in text_columns}
                             | {k: row[k] for k in ("student", "total", "max_total", "error")}
-                            | {c: row.get(c, "") for c in CSV_COLUMNS})
+                            | {c: row.get(c, "") for c in own_columns})
     return rows
 
 
@@ -157,6 +159,26 @@ def _own_agent_fields(student: Path, report: dict[str, Any]) -> dict[str, Any]:
     except ExerciseError:
         folder = None
     return csv_fields(folder, verified)
+
+
+def leaderboard_markdown(rows: Iterable[dict[str, Any]]) -> str:
+    """The class's own agents as a Markdown table, from :func:`grade`'s rows: the students
+    whose report the grader verified first, by done % on the graded protocol (best first),
+    then the claims it could not verify, then those who handed nothing in; ties by name."""
+    def key(row):
+        claimed = row.get("claimed_done_percent", "")
+        rank = 0 if row.get("done_verified") == 1 else 1 if claimed != "" else 2
+        return rank, -(claimed if claimed != "" else 0.0), row["student"]
+
+    lines = ["| # | student | done % (graded protocol) | verified | transitions | episodes |",
+             "|---|---|---|---|---|---|"]
+    for place, row in enumerate(sorted(rows, key=key), start=1):
+        claimed = row.get("claimed_done_percent", "")
+        status = {1: "yes", 0: "no"}.get(row.get("done_verified"), "")
+        lines.append(f"| {place} | {row['student']} | "
+                     f"{'' if claimed == '' else f'{claimed:g}'} | {status} | "
+                     f"{row.get('run_transitions', '')} | {row.get('run_episodes', '')} |")
+    return "\n".join(lines) + "\n"
 
 
 def summary_lines(items: Iterable[dict[str, Any]]) -> list[str]:
