@@ -63,6 +63,9 @@ one rod (built once, each episode starting where the last one stopped), at most
 ``max_steps`` actions, done below ``threshold`` m of mean node distance. Small on purpose:
 the grader runs it again for every student."""
 
+MAX_ACTOR_BYTES = 32 * 2**20
+"""The largest actor file a hand-in may hold (lesson 9's actor is about 0.6 MB)."""
+
 DISTANCE_TOLERANCE = 1e-3
 """m: how far a reported final distance may be from the grader's."""
 
@@ -182,6 +185,9 @@ def read_submission(folder: str | Path) -> tuple[dict[str, Any], bytes]:
     missing = [p.name for p in (report_path, actor) if not p.is_file()]
     if missing:
         raise SubmissionError(f"no {' and no '.join(missing)} in {folder}: {how}")
+    if actor.stat().st_size > MAX_ACTOR_BYTES:
+        raise SubmissionError(f"{actor} is {actor.stat().st_size / 2**20:.0f} MB, not an actor "
+                              f"file of lesson 9 (at most {MAX_ACTOR_BYTES // 2**20} MB): {how}")
     try:
         report = json.loads(report_path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as err:

@@ -110,6 +110,10 @@ def test_read_submission_says_what_is_missing(tmp_path):
     (tmp_path / submission.REPORT_NAME).write_text("{not json")
     with pytest.raises(submission.SubmissionError, match="not readable JSON"):
         submission.read_submission(tmp_path)
+    (tmp_path / submission.REPORT_NAME).write_text("{}")
+    (tmp_path / submission.ACTOR_NAME).write_bytes(b"\0" * (submission.MAX_ACTOR_BYTES + 1))
+    with pytest.raises(submission.SubmissionError, match="not an actor file"):
+        submission.read_submission(tmp_path)
 
 
 def test_the_grader_evaluates_the_actor_again_and_fills_the_class_csv(handed_in, tmp_path):
