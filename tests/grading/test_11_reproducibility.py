@@ -192,3 +192,11 @@ def test_recipes_differ(student):
     want = fresh_answer("recipes_differ", lambda fn: probe_recipes_differ(fn, fresh))
     if want is not None:
         assert student.run(probe_recipes_differ, fresh) == want
+
+
+# ------------------------------------------------------------------ written answers
+
+
+@pytest.mark.exercise("prediction_seeds", points=1)
+def test_prediction_seeds(written_answer):
+    written_answer.check()
