@@ -21,9 +21,12 @@ and holds exactly what :data:`BLOCKS` renders for its name from the repository's
 * ``database``: our small database against the authors'
   (``benchmarks/results/database_vs_authors.txt``);
 * ``speed``: ``benchmarks/results/bench_env.txt`` and ``dlo_train_throughput.txt``;
-* ``reproduction-time``: the protocol summary of ``benchmarks/results/reproduction_time.txt``.
+* ``reproduction-time``: the protocol summary of ``benchmarks/results/reproduction_time.txt``;
+* ``exercises`` and ``course-size``: the graded items of every lesson and their points, and the
+  course's totals, read from the cells' metadata in ``solutions/``
+  (:mod:`dlo_course.grading.notebooks` documents it).
 
-``python -m dlo_course.docs_numbers`` rewrites every block of both files in place after a
+``python -m dlo_course.docs_numbers`` rewrites every block of these files in place after a
 retraining or a new report; ``--check`` only reports the blocks that differ (exit status 1).
 ``tests/test_docs_numbers.py`` fails when a committed block differs from its rendering.
 
@@ -40,7 +43,7 @@ from pathlib import Path
 from typing import Callable
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
-DOCS = ("README.md", "docs/design.md")
+DOCS = ("README.md", "docs/design.md", "lessons/README.md")
 """The files whose blocks are generated, relative to the repository."""
 
 PAPER_TRANSITIONS = 32 * 63 * 300
@@ -251,7 +254,49 @@ def reproduction_time_markdown(root: Path = REPO_ROOT) -> str:
     return "```text\n" + "\n".join(body) + "\n```\n"
 
 
+def _graded_items(root: Path) -> list[tuple[str, list[tuple[str, int, str]], list[str]]]:
+    """(notebook stem, [(name, points, "code" or "text")], required data files) per solution
+    notebook, in the course's order, from the cells' ``dlo_course`` metadata."""
+    lessons = []
+    for path in sorted((root / "solutions").glob("[0-9][0-9]_*.ipynb")):
+        nb = json.loads(path.read_text(encoding="utf-8"))
+        items = []
+        for cell in nb["cells"]:
+            meta = cell.get("metadata", {}).get("dlo_course") or {}
+            if "exercise" in meta and cell["cell_type"] == "code":
+                items.append((meta["exercise"], int(meta.get("points", 1)), "code"))
+            elif "answer" in meta and cell["cell_type"] == "markdown":
+                items.append((meta["answer"], int(meta.get("points", 1)), "text"))
+        needs = nb.get("metadata", {}).get("dlo_course", {}).get("requires", [])
+        lessons.append((path.stem, items, list(needs)))
+    return lessons
+
+
+def exercises_markdown(root: Path = REPO_ROOT) -> str:
+    """One row per lesson: its exercises and written answers with their points, and the
+    data files it needs (``data/...``)."""
+    lines = ["| notebook | exercises (points) | points | needs (in `data/`) |", "|---|---|---|---|"]
+    for stem, items, needs in _graded_items(root):
+        code = ", ".join(f"`{n}` ({p})" for n, p, kind in items if kind == "code")
+        text = ", ".join(f"`{n}` ({p})" for n, p, kind in items if kind == "text")
+        graded = code + (f"; written: {text}" if text else "")
+        lines.append(f"| `{stem}` | {graded} | {sum(p for _, p, _ in items)} | "
+                     f"{', '.join(f'`{n}`' for n in needs)} |")
+    return "\n".join(lines) + "\n"
+
+
+def course_size_markdown(root: Path = REPO_ROOT) -> str:
+    """The course's totals: exercises and written answers, and their points."""
+    items = [item for _, lesson, _ in _graded_items(root) for item in lesson]
+    code = [p for _, p, kind in items if kind == "code"]
+    text = [p for _, p, kind in items if kind == "text"]
+    return (f"{len(code)} exercises ({sum(code)} points) and {len(text)} written answers "
+            f"({sum(text)} points): {sum(code) + sum(text)} points.\n")
+
+
 BLOCKS: dict[str, Callable[[Path], str]] = {
+    "exercises": exercises_markdown,
+    "course-size": course_size_markdown,
     "table1": table1_markdown,
     "agents": agents_markdown,
     "ablation": ablation_markdown,

@@ -9,6 +9,7 @@ shipped agents' records and the benchmark results. After a retraining or a new r
 from __future__ import annotations
 
 import csv
+import json
 import shutil
 from pathlib import Path
 
@@ -17,7 +18,8 @@ import pytest
 from dlo_course import docs_numbers
 from dlo_course.docs_numbers import BLOCKS, DOCS, REPO_ROOT, blocks_in, render
 
-README_BLOCKS = {"table1", "agents"}
+README_BLOCKS = {"table1", "agents", "course-size"}
+LESSONS_BLOCKS = {"exercises", "course-size"}
 DESIGN_BLOCKS = {"ablation", "database", "speed", "reproduction-time"}
 
 
@@ -40,6 +42,7 @@ def test_blocks_match_the_committed_files(name):
 def test_each_block_has_its_place():
     assert set(blocks_in(_text("README.md"))) == README_BLOCKS
     assert set(blocks_in(_text("docs/design.md"))) == DESIGN_BLOCKS
+    assert set(blocks_in(_text("lessons/README.md"))) == LESSONS_BLOCKS
     assert "<!-- main-job-time -->" in _text("README.md")
 
 
@@ -53,7 +56,7 @@ def test_table_one_appears_once_in_the_readme():
 
 def _copy_sources(tmp_path: Path) -> Path:
     for rel in ["docs/reproduction", "data/paper", "benchmarks/results", "README.md",
-                "docs/design.md"]:
+                "docs/design.md", "lessons/README.md", "solutions"]:
         src, dst = REPO_ROOT / rel, tmp_path / rel
         dst.parent.mkdir(parents=True, exist_ok=True)
         if src.is_dir():
@@ -84,6 +87,18 @@ def test_a_changed_shipped_actor_is_caught(tmp_path):
     path = root / "data/checkpoints/nodes4/record.json"
     path.write_text(path.read_text().replace('"episode": 240', '"episode": 160'))
     assert docs_numbers.stale_blocks(root) == ["README.md: agents"]
+
+
+def test_a_changed_exercise_is_caught(tmp_path):
+    # An exercise worth one point more in a solution: the lessons' table and both totals move.
+    root = _copy_sources(tmp_path)
+    path = root / "solutions/02_experience_replay.ipynb"
+    nb = json.loads(path.read_text())
+    cell = next(c for c in nb["cells"] if (c["metadata"].get("dlo_course") or {}).get("exercise"))
+    cell["metadata"]["dlo_course"]["points"] += 1
+    path.write_text(json.dumps(nb))
+    assert sorted(docs_numbers.stale_blocks(root)) == [
+        "README.md: course-size", "lessons/README.md: course-size", "lessons/README.md: exercises"]
 
 
 def test_the_paper_numbers_must_agree(tmp_path):
