@@ -281,3 +281,23 @@ def test_the_course_rubrics_command_lists_every_written_answer():
     for e in notebooks.exercises(notebooks.SOLUTIONS_DIR):
         if e["kind"] == "text":
             assert f"- `{e['exercise']}`: {e['points']} point" in result.output
+
+
+def test_a_student_cannot_lower_the_least_number_of_words(tmp_path):
+    # The course's notebook sets the rule: a student's cell that asks for one word is graded
+    # against the solution's 10, and its criteria, all met here, do not save it.
+    stem = "01_rl_and_the_bellman_equation"
+    nb = notebooks.read_notebook(notebooks.SOLUTIONS_DIR / f"{stem}.ipynb")
+    cell = next(c for c in nb["cells"] if (notebooks.answer_info(c) or {}).get("exercise")
+                == "prediction_sweeps")
+    cell["metadata"]["dlo_course"]["min_words"] = 1
+    cell["source"] = ["<!-- answer: prediction_sweeps (1 point, at least 1 words) -->\n",
+                      "5, because the mask."]
+    student = tmp_path / "student"
+    notebooks.write_notebook(nb, student / f"{stem}.ipynb")
+    out = tmp_path / "grades.json"
+    command = grading_command(student, notebooks.GRADING_TESTS_DIR, out) + ["-k", "prediction_sweeps"]
+    proc = subprocess.run(command, cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    assert out.is_file(), proc.stdout[-3000:] + proc.stderr[-3000:]
+    entry = {e["exercise"]: e for e in json.loads(out.read_text())["exercises"]}["prediction_sweeps"]
+    assert entry["earned"] == 0 and "at least 10 words" in entry["message"]

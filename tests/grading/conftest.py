@@ -401,9 +401,9 @@ class WrittenAnswer:
 @pytest.fixture
 def written_answer(request):
     """The graded written answer (the test's ``exercise`` marker) as a :class:`WrittenAnswer`;
-    its text is recorded with the grades, even when it is too short. Its rubric is the
-    course's solution's when ``solutions/`` has the notebook (a student who edits or drops
-    the cell's metadata cannot change it), else the cell's own."""
+    its text is recorded with the grades, even when it is too short. Its rubric and least
+    number of words are the course's solution's when ``solutions/`` has the notebook (a
+    student who edits or drops the cell's metadata cannot change them), else the cell's own."""
     from dlo_course.grading.notebooks import SOLUTIONS_DIR, written_answers
     from dlo_course.grading.runner import ExerciseError, find_notebook
 
@@ -416,15 +416,15 @@ def written_answer(request):
     if name not in answers:
         pytest.fail(f"{notebook}.ipynb: no written-answer cell for {name!r} (keep the cell "
                     f"and its first line <!-- answer: {name} ... -->)", pytrace=False)
-    rubric = answers[name]["rubric"]
+    rubric, min_words = answers[name]["rubric"], answers[name]["min_words"]
     solution = SOLUTIONS_DIR / f"{notebook}.ipynb"
     if solution.is_file():
         try:
-            rubric = written_answers(solution).get(name, {}).get("rubric", rubric)
+            course = written_answers(solution).get(name, {})
         except ValueError as err:
             pytest.fail(str(err), pytrace=False)
+        rubric, min_words = course.get("rubric", rubric), course.get("min_words", min_words)
     record = _GRADES.get(request.node.nodeid)
     if record is not None:
         record["text"] = answers[name]["text"]
-    return WrittenAnswer(name, answers[name]["text"], answers[name]["min_words"], rubric,
-                         record)
+    return WrittenAnswer(name, answers[name]["text"], min_words, rubric, record)
