@@ -11,6 +11,7 @@ import copy
 import csv
 import json
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -24,6 +25,8 @@ from dlo_course.grading import bundle as bundle_module
 from dlo_course.grading import notebooks
 from dlo_course.grading.bundle import STUDENT_EXCLUDE, release_student
 from dlo_course.grading.grade import grade, grading_command
+from dlo_course.paths import AGENTS_DIR
+from dlo_course.submission import CSV_COLUMNS
 
 REPO = Path(__file__).resolve().parents[1]
 SOLUTIONS, LESSONS = REPO / "solutions", REPO / "lessons"
@@ -41,6 +44,44 @@ def run_grader(notebooks: Path, tmp_path: Path, timeout_per_exercise: float = 60
     return report
 
 
+def fresh_run(folder: Path) -> Path:
+    """A run directory holding a freshly initialised 2-node actor (not the shipped one) beside
+    the configuration and learning curve of the shipped 2-node agent's run: what lesson 9
+    leaves, without the training."""
+    import torch
+
+    from dlo_course.ddpg import Actor, save_network
+    from dlo_course.task import observation_size
+
+    folder.mkdir(parents=True)
+    torch.manual_seed(13)
+    save_network(Actor(observation_size(2), 3), folder / "actor.pt")
+    for name in ("config.json", "progress.csv"):
+        shutil.copyfile(AGENTS_DIR / "nodes2" / name, folder / name)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def handed_in(tmp_path_factory) -> Path:
+    """Lesson 13's hand-in folder of a fresh actor, written once by the library (one
+    evaluation of the graded protocol); copy it beside a notebook to grade it."""
+    from dlo_course.submission import SUBMISSION_DIR, write_submission
+
+    root = tmp_path_factory.mktemp("handed_in")
+    write_submission(fresh_run(root / "run"), root / SUBMISSION_DIR)
+    return root / SUBMISSION_DIR
+
+
+def hand_in(handed_in: Path, folder: Path) -> None:
+    shutil.copytree(handed_in, folder / handed_in.name)
+
+
+def handed_in_run(handed_in: Path) -> tuple[int, int]:
+    """(transitions, episodes) of the run that the hand-in's report records."""
+    run = json.loads((handed_in / "report.json").read_text())["run"]
+    return run["transitions"], run["episodes"]
+
+
 def catalog() -> dict[str, int]:
     return {e["exercise"]: e["points"] for e in notebooks.exercises(SOLUTIONS)}
 
@@ -51,7 +92,7 @@ def catalog() -> dict[str, int]:
 def test_course_has_enough_lessons_and_exercises():
     assert len(NOTEBOOKS) >= 10
     assert len(catalog()) >= 20
-    for required in ("bellman_target", "critic_loss", "policy_loss", "polyak_update",
+    for required in ("bellman_target", "critic_loss", "ddpg_update", "polyak_update",
                      "mean_node_distance", "reduce_gradients"):
         assert required in catalog()
 
@@ -74,8 +115,9 @@ def test_each_lesson_has_goals_exercises_summary_and_reading(path):
     for cell in nb["cells"]:  # a written answer's metadata and its first-line comment agree
         info = notebooks.answer_info(cell)
         if info is not None:
-            without_metadata = {**cell, "metadata": {}}
-            assert notebooks.answer_info(without_metadata) == info, notebooks.cell_source(cell)
+            without_metadata = {**cell, "metadata": {}}  # the rubric lives in the metadata only
+            assert notebooks.answer_info(without_metadata) == \
+                {k: v for k, v in info.items() if k != "rubric"}, notebooks.cell_source(cell)
 
 
 # ------------------------------------------------------------------------ release
@@ -162,8 +204,13 @@ def test_release_rejects_a_malformed_exercise(tmp_path):
 # ------------------------------------------------------------------------ grading
 
 
-def test_grader_gives_full_points_to_the_solutions(tmp_path):
-    report = run_grader(SOLUTIONS, tmp_path)
+def test_grader_gives_full_points_to_the_solutions(tmp_path, handed_in):
+    graded = tmp_path / "solutions"  # a copy, with lesson 13's hand-in (never committed)
+    graded.mkdir()
+    for path in NOTEBOOKS:
+        shutil.copyfile(path, graded / path.name)
+    hand_in(handed_in, graded)
+    report = run_grader(graded, tmp_path)
     assert report["returncode"] == 0, report["output"][-5000:]
     graded = {e["exercise"]: e for e in report["exercises"]}
     assert {name: e["points"] for name, e in graded.items()} == catalog(), \
@@ -183,12 +230,14 @@ def test_grader_fails_every_exercise_of_the_untouched_lessons(tmp_path):
     assert report["total"] == 0
 
 
-def make_submissions(root: Path) -> None:
-    """alice: the solutions. bob: one endless loop, one syntax error, an exercise cell that
-    lost its metadata (kept its comment), a missing notebook, a crashing answer."""
+def make_submissions(root: Path, handed_in: Path) -> None:
+    """alice: the solutions and lesson 13's hand-in. bob: no hand-in, one endless loop, one
+    syntax error, an exercise cell that lost its metadata (kept its comment), a missing
+    notebook, a crashing answer."""
     alice, bob = root / "alice", root / "bob"
     alice.mkdir(parents=True)
     bob.mkdir(parents=True)
+    hand_in(handed_in, alice)
     for path in NOTEBOOKS:
         (alice / path.name).write_bytes(path.read_bytes())
         if path.stem.startswith("02_"):
@@ -211,15 +260,20 @@ def make_submissions(root: Path) -> None:
         notebooks.write_notebook(nb, bob / path.name)
 
 
-def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monkeypatch):
-    make_submissions(tmp_path / "submissions")
+def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monkeypatch,
+                                                                 handed_in):
+    make_submissions(tmp_path / "submissions", handed_in)
     monkeypatch.setenv("DLO_COURSE_GRADING_TIMEOUT", "5")
     out = tmp_path / "grades.csv"
     started = time.perf_counter()
     result = CliRunner().invoke(main, ["course", "grade", str(tmp_path / "submissions"),
-                                       "--out", str(out)])
+                                       "--out", str(out), "--leaderboard",
+                                       str(tmp_path / "agents.md")])
     assert result.exit_code == 0, result.output
     assert time.perf_counter() - started < 300
+    board = (tmp_path / "agents.md").read_text().splitlines()  # alice's hand-in, verified
+    assert board[2:] == ["| 1 | alice | 0 | yes | " + " | ".join(
+        str(v) for v in handed_in_run(handed_in)) + " |", "| 2 | bob |  | no |  |  |"]
     with out.open(newline="") as f:
         rows = {row["student"]: row for row in csv.DictReader(f)}
     points = catalog()
@@ -227,7 +281,8 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
     alice = rows["alice"]
     assert float(alice["total"]) == float(alice["max_total"]) == sum(points.values())
     bob = rows["bob"]
-    lost = {"bellman_target", "discounted_return", "critic_loss", "stored_done", "RingBuffer"}
+    lost = {"bellman_target", "discounted_return", "critic_loss", "RingBuffer", "prediction_ring",
+            "own_agent_report"}
     for name, value in points.items():
         expected = 0 if name in lost else value
         assert float(bob[name]) == expected, f"bob's {name}: {bob[name]}, expected {expected}"
@@ -271,7 +326,7 @@ def test_written_answer_problem_counts_words():
 CAPSTONE = "13_capstone_table_one"
 
 
-def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path):
+def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, handed_in):
     """Grading a class records each written answer verbatim in the CSV (points for presence
     and length only) and writes one Markdown feedback sheet per student: points per
     exercise and the failing check's message, without tracebacks."""
@@ -284,6 +339,7 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path):
     (submissions / "carol").mkdir(parents=True)  # hands in nothing
     (submissions / "alice" / f"{CAPSTONE}.ipynb").write_bytes(
         (SOLUTIONS / f"{CAPSTONE}.ipynb").read_bytes())
+    hand_in(handed_in, submissions / "alice")
     essay = ('Our agents trail the paper in most cells, "clearly"; yet, with 20 episodes,\n'
              "the intervals are wide — so: more episodes first, then longer training, on more "
              "ranks, before any claim of a reproduction can be made by anyone.")
@@ -296,11 +352,8 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path):
         if info is None:
             continue
         source = notebooks.cell_source(cell)
-        if info["exercise"] == "done_interval":
-            source = solved["done_interval"]
-        elif info["exercise"] == "paper_verdict":  # a wrong answer: the labels swapped
-            source = solved["paper_verdict"].replace('return "above"', 'return "x"').replace(
-                'return "below"', 'return "above"').replace('return "x"', 'return "below"')
+        if info["exercise"] == "count_not_worse":  # a wrong answer: counts the wrong cells
+            source = solved["count_not_worse"].replace('!= "below"', '== "below"')
         elif info["exercise"] == "analysis_next_step":
             source = source.replace(notebooks.ANSWER_PLACEHOLDER, essay)
         elif info["exercise"] == "prediction_cells":
@@ -317,7 +370,9 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path):
         graded = [e for e in notebooks.exercises(catalog_dir)]
         texts = [e["exercise"] for e in graded if e["kind"] == "text"]
         assert reader.fieldnames == ["student", *[e["exercise"] for e in graded], "total",
-                                     "max_total", "error", *[f"{t}_text" for t in texts]]
+                                     "max_total", "error", *CSV_COLUMNS,
+                                     *[f"{t}_{part}" for t in texts
+                                                             for part in ("text", "rubric")]]
         csv_rows = {row["student"]: row for row in reader}
     alice, bob, carol = csv_rows["alice"], csv_rows["bob"], csv_rows["carol"]
     points = {e["exercise"]: e["points"] for e in graded}
@@ -329,8 +384,16 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path):
     assert float(bob["analysis_next_step"]) == points["analysis_next_step"]
     assert bob["prediction_cells_text"] == "Six." and float(bob["prediction_cells"]) == 0
     assert bob["analysis_comparison_text"] == "" and float(bob["analysis_comparison"]) == 0
-    assert float(bob["done_interval"]) == points["done_interval"]
-    assert float(bob["paper_verdict"]) == 0
+    assert float(bob["count_not_worse"]) == 0
+    # the hand-in: alice's verified report (a fresh actor: no goal reached), bob's absent
+    assert float(alice["own_agent_report"]) == points["own_agent_report"]
+    assert (alice["claimed_done_percent"], alice["done_verified"]) == ("0.0", "1")
+    progress = (AGENTS_DIR / "nodes2" / "progress.csv").read_text().splitlines()
+    last = dict(zip(progress[0].split(","), progress[-1].split(",")))
+    assert (alice["run_transitions"], alice["run_episodes"]) == (last["transitions"],
+                                                                 last["episode"])
+    assert [bob[c] for c in CSV_COLUMNS] == ["", "0", "", ""]
+    assert [carol[c] for c in CSV_COLUMNS] == ["", "0", "", ""]
     assert float(carol["total"]) == 0 and all(carol[f"{t}_text"] == "" for t in texts)
 
     feedback = tmp_path / "grades_feedback"
@@ -338,9 +401,9 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path):
     assert "Every check passed." in (feedback / "alice.md").read_text()
     sheet = (feedback / "bob.md").read_text()
     assert f"**Total: {float(bob['total']):g} / {sum(points.values()):g} points.**" in sheet
-    assert f"| {CAPSTONE} | `done_interval` | 2 / 2 | passed |" in sheet
-    assert "| `paper_verdict` | 0 / 1 | failed |" in sheet
-    assert "### `paper_verdict`" in sheet and "expected 'below'" in sheet
+    assert "| `count_not_worse` | 0 / 3 | failed |" in sheet
+    assert "### `count_not_worse`" in sheet and "count the verdicts" in sheet
+    assert "### `own_agent_report`" in sheet and "no report.json" in sheet
     assert "1 word: this answer needs at least 10 words" in sheet
     assert "no answer written" in sheet  # analysis_comparison
     for noise in ("Traceback", "tests/grading/", "conftest.py", "Failed: "):
@@ -397,8 +460,10 @@ def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path,
 
 
 # Exercises whose solution calls earlier answers of its notebook: graded right only with them
-USES_EARLIER = {"count_not_worse": ("done_interval", "paper_verdict"),
-                "td3_target": ("smoothed_target_action",)}
+USES_EARLIER = {"Critic": ("build_mlp",),
+                "sweep_offsets_inside": ("level_moves",),
+                "td3_target": ("smoothed_target_action",),
+                "td3_update": ("td3_target", "smoothed_target_action")}
 
 
 def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
@@ -443,7 +508,8 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
                 got = 0
                 if choice in (1, 2):
                     cell["source"] = solved[exercise].splitlines(keepends=True)
-                    got = points[exercise]
+                    # own_agent_report is graded from lesson 13's hand-in, which no one makes
+                    got = 0 if exercise == "own_agent_report" else points[exercise]
                 elif choice == 3:
                     old, new = MUTANTS[exercise][0][1:3]
                     cell["source"] = mutate(solved[exercise], old, new).splitlines(keepends=True)
@@ -460,11 +526,12 @@ def test_grading_a_class_gives_the_right_csv(tmp_path):
                                        "--out", str(out), "--jobs", "2"])
     elapsed = time.perf_counter() - started
     assert result.exit_code == 0, result.output
-    texts = [f"{e['exercise']}_text" for e in notebooks.exercises(SOLUTIONS) if e["kind"] == "text"]
+    texts = [f"{e['exercise']}_{part}" for e in notebooks.exercises(SOLUTIONS)
+             if e["kind"] == "text" for part in ("text", "rubric")]
     with out.open(newline="") as f:
         reader = csv.DictReader(f)
         assert reader.fieldnames == ["student", *catalog(), "total", "max_total", "error",
-                                     *texts]
+                                     *CSV_COLUMNS, *texts]
         rows = {row["student"]: row for row in reader}
     assert list(rows) == sorted(expected)
     for student, points in expected.items():

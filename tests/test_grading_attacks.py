@@ -60,14 +60,14 @@ for module in list(sys.modules.values()):
 def discounted_return(rewards, gamma):
     return 0.0
 '''),
-    "stored_done": ("patches the grader's library (dlo_course.grading), wrong answer", '''
+    "ou_step": ("patches the grader's library (dlo_course.grading), wrong answer", '''
 load = getattr(__builtins__, "__imp" + "ort__", None) or __builtins__["__imp" + "ort__"]
 grader = load("dlo_" + "course.grading.sandbox", fromlist=["x"])
 grader.decode_data = lambda data: 0.0
 grader.Sandbox.run = lambda *args, **kwargs: {"status": "ok", "value": None}
 load("dlo_" + "course.grading.data", fromlist=["x"]).decode_data = lambda data: 0.0
-def stored_done(terminated, truncated):
-    return 1.0
+def ou_step(x, rng, theta=0.15, sigma=0.3, mu=0.0, dt=1.0):
+    return np.asarray(x, dtype=np.float64)
 '''),
     "tip_target": ("writes outside its scratch folder (open, os.open, pathlib, torch.save)", '''
 import os, pathlib
@@ -85,10 +85,12 @@ open("{canary}", "w").write("pwned")  # the cell fails here: tip_target is never
 def tip_target(tip, action, initial_tip, params):
     return tip
 '''),
-    "critic_value": ("spins forever", '''
-def critic_value(net, obs, act):
-    while True:
-        pass
+    "Critic": ("spins forever", '''
+class Critic(nn.Module):
+    def __init__(self, obs_dim, act_dim, hidden_sizes=(256, 256, 256), final_init=3e-3):
+        super().__init__()
+        while True:
+            pass
 '''),
     "build_mlp": ("spins forever at the top of its cell (the later exercises must not wait)", '''
 while True:
@@ -112,16 +114,17 @@ def squash_action(raw, low, high):
             print("refused:", err)
     return raw
 '''),
-    "inside_box": ("forks", '''
+    "step_outcome": ("forks", '''
 import os
-def inside_box(points, low, high):
+def step_outcome(distance, threshold, steps, max_episode_steps, unstable=False,
+                 last_distance=None):
     if os.fork() == 0:
         os._exit(0)
-    return np.ones(len(points), bool)
+    return {"reward": -distance, "terminated": True, "truncated": False, "is_success": True}
 '''),
-    "sweep_count": ("exits the process before the grader gets an answer", '''
+    "sweep_offsets_inside": ("exits the process before the grader gets an answer", '''
 import os
-def sweep_count(divisions):
+def sweep_offsets_inside(box, region):
     print('{"status": "ok", "value": 930}')
     os._exit(0)
 '''),
@@ -133,11 +136,11 @@ def pack_gradients(module):
             return loaded.library_pack(module)
     raise RuntimeError("no reference in reach")
 '''),
-    "policy_loss": ("reads the solution and the grader's answers (open, pathlib, os.open, "
+    "ddpg_update": ("reads the solution and the grader's answers (open, pathlib, os.open, "
                     "import), and runs the solution's cell if it got it", '''
 import json, os, pathlib, sys
-def policy_loss(q):
-    return q.mean()  # wrong: replaced below by the solution's cell, if it can be read
+def ddpg_update(agent, batch):
+    pass  # wrong: replaced below by the solution's cell, if it can be read
 SOLUTION, ANSWERS = "{solutions}/04_ddpg.ipynb", "{grading}/answers.py"
 def with_os_open():
     fd = os.open(SOLUTION, os.O_RDONLY)
@@ -157,7 +160,7 @@ run = getattr(__builtins__, "ex" + "ec", None) or __builtins__["ex" + "ec"]
 for text in leaked:
     if text.lstrip().startswith("{"):
         for cell in json.loads(text)["cells"]:
-            if "def policy_loss" in "".join(cell["source"]):
+            if "def ddpg_update" in "".join(cell["source"]):
                 run("".join(cell["source"]))
 '''),
     # delegation to the library's reference
@@ -250,11 +253,11 @@ def test_attack_outcomes_say_why(attacked):
     outcome = {e["exercise"]: e["outcome"] for e in attacked["exercises"]}
     for name in DELEGATIONS:
         assert outcome[name] == "delegates", (name, outcome[name])
-    assert outcome["critic_value"] == "timeout"
+    assert outcome["Critic"] == "timeout"
     assert "the answer calls dlo_course.simulation.lame_parameters" in attacked["output"]
     assert "library reference" in attacked["output"]
     if "dlo_course" not in str(REPO):  # else its paths name the library: rejected statically
-        assert outcome["policy_loss"] == "failed"  # it ran, without the solution it tried to read
+        assert outcome["ddpg_update"] == "failed"  # it ran, without the solution it tried to read
 
 
 TRY_ACTION = '''

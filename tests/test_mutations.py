@@ -57,14 +57,24 @@ MUTANTS: dict[str, list[tuple]] = {
         ("min for max", "np.max(q, axis=1)", "np.min(q, axis=1)"),
         ("missing done mask", "gamma * best_next * (1.0 - done)", "gamma * best_next"),
         ("value of the current state", "np.max(q, axis=1)[next_state]", "np.max(q, axis=1)[:, None]")],
-    "stored_done": [
-        ("done on truncation too", "float(bool(terminated))", "float(bool(terminated or truncated))"),
-        ("truncation for termination", "float(bool(terminated))", "float(bool(truncated))")],
+    "prediction_seeds": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "They will overlap, I think.")],
+    "prediction_sweeps": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "Five sweeps, I think.")],
     "RingBuffer": [
         ("off-by-one size", "min(self._size + 1, self.capacity)", "min(self._size + 1, self.capacity - 1)"),
         ("samples empty rows", "self.rng.integers(0, self._size,", "self.rng.integers(0, self.capacity,"),
         ("global generator", "self.rng.integers(0, self._size, size=batch_size)",
-         "np.random.randint(0, self._size, size=batch_size)")],
+         "np.random.randint(0, self._size, size=batch_size)"),
+        ("done on truncation too", "self.done[i] = float(terminated)",
+         "self.done[i] = float(terminated or truncated)"),
+        ("truncation for termination", "self.done[i] = float(terminated)",
+         "self.done[i] = float(truncated)")],
+    "prediction_ring": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "Rewards 5, 6, 7, 3, 4.")],
     "build_mlp": [
         ("missing ReLU", "layers += [nn.Linear(width, h), nn.ReLU()]", "layers += [nn.Linear(width, h)]"),
         ("default output initialisation", "    nn.init.uniform_(out.weight, -final_init, final_init)\n"
@@ -73,9 +83,16 @@ MUTANTS: dict[str, list[tuple]] = {
     "squash_action": [
         ("scale and centre swapped", "bias + scale * torch.tanh(raw)", "scale + bias * torch.tanh(raw)"),
         ("clamp for tanh", "torch.tanh(raw)", "torch.clamp(raw, -1, 1)")],
-    "critic_value": [
+    "Critic": [
         ("action before observation", "torch.cat([obs, act], dim=-1)", "torch.cat([act, obs], dim=-1)"),
-        ("squeezed output", "net(torch.cat([obs, act], dim=-1))", "net(torch.cat([obs, act], dim=-1)).squeeze(-1)")],
+        ("squeezed output", "self.net(torch.cat([obs, act], dim=-1))",
+         "self.net(torch.cat([obs, act], dim=-1)).squeeze(-1)"),
+        ("action detached: no dQ/da for the actor", "torch.cat([obs, act], dim=-1)",
+         "torch.cat([obs, act.detach()], dim=-1)"),
+        ("network on the observation alone", "build_mlp(obs_dim + act_dim,", "build_mlp(obs_dim,")],
+    "prediction_parameters": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "About 140 000.")],
     "parameter_counts": [
         ("forgets the biases", "total += (width + 1) * h", "total += width * h"),
         ("critic without the action", "count(obs_dim + act_dim, 1)", "count(obs_dim, 1)")],
@@ -86,9 +103,6 @@ MUTANTS: dict[str, list[tuple]] = {
          "    if q.shape != q_target.shape:\n        raise ValueError(f\"q {tuple(q.shape)} and "
          "q_target {tuple(q_target.shape)} differ\")\n    return ((q - q_target) ** 2).mean()",
          "    return torch.nn.functional.mse_loss(q, q_target)", 1.5)],
-    "policy_loss": [
-        ("wrong sign", "return -q.mean()", "return q.mean()"),
-        ("sum for mean", "return -q.mean()", "return -q.sum()")],
     "polyak_update": [
         ("swapped Polyak factors", "w_target.mul_(1.0 - tau).add_(w, alpha=tau)",
          "w_target.mul_(tau).add_(w, alpha=1.0 - tau)"),
@@ -102,7 +116,14 @@ MUTANTS: dict[str, list[tuple]] = {
          "((agent.actor_target, agent.actor),)"),
         ("trained networks, not the targets, in the Bellman target",
          "agent.critic_target(next_obs, agent.actor_target(next_obs))",
-         "agent.critic(next_obs, agent.actor(next_obs))")],
+         "agent.critic(next_obs, agent.actor(next_obs))"),
+        ("policy loss with the wrong sign", "loss_pi = -agent.critic(obs, agent.actor(obs)).mean()",
+         "loss_pi = agent.critic(obs, agent.actor(obs)).mean()"),
+        ("policy loss summed, not averaged", "loss_pi = -agent.critic(obs, agent.actor(obs)).mean()",
+         "loss_pi = -agent.critic(obs, agent.actor(obs)).sum()")],
+    "prediction_actor": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "0.5 and 1.")],
     "ou_step": [
         ("dt for sqrt(dt)", "sigma * np.sqrt(dt) *", "sigma * dt *"),
         ("drift away from mu", "theta * (mu - x)", "theta * (x - mu)")],
@@ -118,6 +139,9 @@ MUTANTS: dict[str, list[tuple]] = {
     "lame_parameters": [
         ("swapped results", "return mu, lam", "return lam, mu"),
         ("shear modulus without the 2", "(2.0 * (1.0 + poisson_ratio))", "(1.0 + poisson_ratio)")],
+    "prediction_substep": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "Both blow up, the 3 ms first.")],
     "split_observation": [
         ("desired read from the current nodes", '"desired": obs[6 + m3:6 + 2 * m3]', '"desired": obs[6:6 + m3]'),
         ("velocity read from the position", '"tip_velocity": obs[3:6]', '"tip_velocity": obs[0:3]')],
@@ -127,19 +151,30 @@ MUTANTS: dict[str, list[tuple]] = {
     "mean_node_distance": [
         ("squared distances", "np.linalg.norm(diff, axis=-1)", "np.sum(diff ** 2, axis=-1)"),
         ("norm of all nodes at once", "np.mean(np.linalg.norm(diff, axis=-1))", "np.linalg.norm(diff) / len(diff)")],
-    "episode_flags": [
-        ("<= for <", "distance < threshold", "distance <= threshold"),
-        ("> for >=", "steps >= max_episode_steps", "steps > max_episode_steps")],
+    "step_outcome": [
+        ("<= for <", "bool(distance < threshold)", "bool(distance <= threshold)"),
+        ("> for >=", "steps >= max_episode_steps", "steps > max_episode_steps"),
+        ("the garbage distance after a blow-up", "-last_distance, False, True, False",
+         "-distance, False, True, False"),
+        ("a blow-up not truncated", "-last_distance, False, True, False",
+         "-last_distance, False, False, False")],
+    "prediction_nothing": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "The same reward every time.")],
     "level_moves": [
         ("ignores the direction", "direction * sy", "sy"),
         ("floor for ceil", "math.ceil(ry / 2)", "ry // 2")],
-    "sweep_count": [
-        ("floor for ceil", "math.ceil(ry / 2)", "ry // 2"),
-        ("forgets the move down", "* (rx + 1) + 1)", "* (rx + 1))")],
-    "inside_box": [
-        ("borders outside", "(points >= np.asarray(low)) & (points <= np.asarray(high))",
-         "(points > np.asarray(low)) & (points < np.asarray(high))"),
+    "sweep_offsets_inside": [
+        ("offsets from the start corner, not the initial tip",
+         "np.cumsum(np.concatenate([start, *levels]), axis=0)[len(start):]",
+         "np.cumsum(np.concatenate(levels), axis=0)"),
+        ("every level in the same direction", "(-1) ** level", "1"),
+        ("borders outside", "(offsets >= np.asarray(region.low)) & (offsets <= np.asarray(region.high))",
+         "(offsets > np.asarray(region.low)) & (offsets < np.asarray(region.high))"),
         ("any for all", "np.all(", "np.any(")],
+    "prediction_inside": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "About forty per cent.")],
     "reduce_gradients": [
         ("mean and sum swapped", 'if op == "mean":', 'if op == "sum":'),
         ("mean for sum", "np.sum([np.asarray(grads[i]) for grads in per_rank], axis=0)",
@@ -162,13 +197,24 @@ MUTANTS: dict[str, list[tuple]] = {
         ("reduces the parameters, not the gradients", _ALLREDUCE,
          _ALLREDUCE.replace("p.grad.reshape(-1)", "p.detach().reshape(-1)")
          .replace("p.grad.copy_(", "p.data.copy_("))],
+    "prediction_transitions": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "32 times as many.")],
     "play_episode": [
         ("stores truncation as done", "buffer.add(obs, action, reward, next_obs, terminated)",
          "buffer.add(obs, action, reward, next_obs, terminated or truncated)"),
-        ("never moves to the next observation", "        obs = next_obs\n", "")],
-    "updates_can_start": [
-        ("> for >=", "min(buffer_sizes) >= needed", "min(buffer_sizes) > needed"),
-        ("max for min", "min(buffer_sizes)", "max(buffer_sizes)")],
+        ("never moves to the next observation", "        obs = next_obs\n", ""),
+        ("> for >= (one transition too late)", "len(buffer) >= needed", "len(buffer) > needed"),
+        ("warmup ignored", "needed = warmup or batch_size", "needed = batch_size"),
+        ("one update per action, whatever updates_per_step",
+         "for _ in range(updates_per_step):", "for _ in range(1):"),
+        ("no update after the episode's last action",
+         "        if update is not None and len(buffer) >= needed:",
+         "        if update is not None and len(buffer) >= needed and not (terminated or "
+         "truncated):")],
+    "prediction_updates": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "Fourteen updates.")],
     "table_row": [
         ("sample standard deviation", "final.std()", "final.std(ddof=1)"),
         ("fraction for percent", "100.0 * done.mean()", "done.mean()")],
@@ -176,6 +222,9 @@ MUTANTS: dict[str, list[tuple]] = {
         ("z for z squared in the centre", "(p + z * z / (2 * n))", "(p + z / (2 * n))"),
         ("normal approximation", "z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator",
          "z * math.sqrt(p * (1 - p) / n)")],
+    "prediction_verdicts": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "In all six cells.")],
     "steps_per_action": [
         ("rounds up", "round(action_duration / time_step)", "-(-action_duration // time_step)"),
         ("no minimum of one", "max(1, round(action_duration / time_step))", "round(action_duration / time_step)")],
@@ -184,10 +233,6 @@ MUTANTS: dict[str, list[tuple]] = {
         ("eps inside the square root", "(np.sqrt(v_hat) + eps)", "np.sqrt(v_hat + eps)"),
         ("swapped betas", "m = beta1 * np.asarray(m) + (1 - beta1) * grad",
          "m = beta2 * np.asarray(m) + (1 - beta2) * grad")],
-    "goal_distance": [
-        ("sum over the nodes for mean", "np.mean(np.linalg.norm(diff, axis=-1), axis=-1)",
-         "np.sum(np.linalg.norm(diff, axis=-1), axis=-1)"),
-        ("squared distances", "np.linalg.norm(diff, axis=-1)", "np.sum(diff ** 2, axis=-1)")],
     "future_goal_steps": [
         ("goal steps up to T included", "rng.integers(steps, episode_length)",
          "rng.integers(steps, episode_length + 1)"),
@@ -198,7 +243,13 @@ MUTANTS: dict[str, list[tuple]] = {
     "relabel": [
         ("reward of the wrong sign", '"rew": (-distance)', '"rew": (distance)'),
         ("goal taken from obs, not next_obs", "goals = achieved_next[goal_steps]",
-         "goals = obs[:, -2 * width:-width].reshape(len(obs), n_nodes, 3)[goal_steps]")],
+         "goals = obs[:, -2 * width:-width].reshape(len(obs), n_nodes, 3)[goal_steps]"),
+        ("sum over the nodes for mean", "np.mean(np.linalg.norm(diff, axis=-1), axis=-1)",
+         "np.sum(np.linalg.norm(diff, axis=-1), axis=-1)"),
+        ("squared distances", "np.linalg.norm(diff, axis=-1)", "np.sum(diff ** 2, axis=-1)")],
+    "prediction_successes": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "About ten percent.")],
     "jacobian_from_probes": [
         ("J transposed", "    return transposed.T\n", "    return transposed\n"),
         ("each probe taken as one axis (finite differences of the diagonal only)",
@@ -222,21 +273,15 @@ MUTANTS: dict[str, list[tuple]] = {
         ("no check of the damping (secondary requirement only)",
          "    if damping < 0:\n        raise ValueError(f\"damping must be >= 0, got {damping}\")\n",
          "", 1.5)],
-    "done_interval": [
-        ("normal approximation",
-         "z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denominator",
-         "z * math.sqrt(p * (1 - p) / n)"),
-        ("fractions, not percent", "return 100 * max(0.0, centre - half), 100 * min(1.0, centre + half)",
-         "return max(0.0, centre - half), min(1.0, centre + half)"),
-        ("done % taken as the count of successes", "k = round(done_percent * n / 100)",
-         "k = min(round(done_percent), n)")],
-    "paper_verdict": [
-        ("names read from the paper's side", 'return "above"\n    if paper_done > high:\n'
-         '        return "below"', 'return "below"\n    if paper_done > high:\n        return "above"'),
-        ("the interval's ends excluded", "if paper_done < low:", "if paper_done <= low:")],
     "count_not_worse": [
         ("counts only the cells it cannot tell apart", '!= "below"', '== "within"'),
-        ("counts the cells where ours is worse", '!= "below"', '== "below"')],
+        ("counts the cells where ours is worse", '!= "below"', '== "below"'),
+        ("the interval's high end left out of it", "if paper > high", "if paper >= high"),
+        ("names read from the paper's side", '"above" if paper < low else "below" if paper > high',
+         '"below" if paper < low else "above" if paper > high')],
+    "own_agent_report": [
+        ("hands in the shipped agent", "hand_in(agent, folder)", "hand_in(SHIPPED_AGENT, folder)"),
+        ("hands in nothing", "return hand_in(agent, folder)", "return {}")],
     "saturation_report": [
         ("measured on the scaled action, not on tanh(u)", "squashed = torch.tanh(u).double()",
          "squashed = actor.squash(u).double()"),
@@ -244,11 +289,12 @@ MUTANTS: dict[str, list[tuple]] = {
          "(1.0 - squashed.abs()).mean()"),
         ("mean of u, not of |u|", "u.double().abs().mean()", "u.double().mean()"),
         ("per-dimension share over the wrong axis", "beyond.mean(dim=0)", "beyond.mean(dim=1)")],
-    "discounted_returns": [
-        ("bootstrap ignored", "running = float(bootstrap)", "running = 0.0"),
-        ("no discount", "rewards[t] + gamma * running", "rewards[t] + running"),
-        ("discount on the reward, not on the future", "rewards[t] + gamma * running",
-         "gamma * rewards[t] + running")],
+    "overestimation": [
+        ("returns of the cut episode, without their tail",
+         'rewards = np.asarray(episode["rew"], dtype=np.float64)',
+         'rewards = np.asarray(episode["rew"], dtype=np.float64)[:compared]'),
+        ("bias as G - Q", "np.mean(q - returns)", "np.mean(returns - q)"),
+        ("no discount", "rewards[t] + gamma * running", "rewards[t] + running")],
     "smoothed_target_action": [
         ("noise not clipped", "eps = noise.clamp(-noise_clip, noise_clip)", "eps = noise"),
         ("action not clipped to the bounds",
@@ -262,11 +308,17 @@ MUTANTS: dict[str, list[tuple]] = {
         ("no done mask", "gamma * next_q * (1.0 - done)", "gamma * next_q"),
         ("no target policy smoothing", "        if noise is not None:\n",
          "        if False:\n")],
-    "actor_update_due": [
-        ("the actor steps at the first update", "critic_updates % policy_delay == 0",
-         "(critic_updates - 1) % policy_delay == 0"),
-        ("inverted decision", "critic_updates % policy_delay == 0",
-         "critic_updates % policy_delay != 0")],
+    "td3_update": [
+        ("the actor steps at every update", "    if agent.updates % cfg.policy_delay != 0:\n",
+         "    if False:\n"),
+        ("the second critic never trained", "for critic, optimizer in zip(agent.critics, ",
+         "for critic, optimizer in zip(agent.critics[:1], "),
+        ("no pre-tanh penalty", " + cfg.preactivation_l2 * (u ** 2).mean()", ""),
+        ("targets of the critics left behind",
+         "        for target, net in pairs:", "        for target, net in pairs[:1]:")],
+    "prediction_overestimation": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "DDPG overestimates more.")],
     "scale_params": [
         ("factor added, not multiplied", "getattr(params, name) * factor",
          "getattr(params, name) + factor"),
@@ -287,6 +339,16 @@ MUTANTS: dict[str, list[tuple]] = {
          "float(rng.uniform(checked[name][1], checked[name][0]))"),
         ("zero and negative bounds accepted", "if not (math.isfinite(bound) and bound > 0):",
          "if not math.isfinite(bound):")],
+    "prediction_controller_vs_agent": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "The agent wins."),
+        ("neither an outcome nor a reason", WHOLE_ANSWER,
+         "I will run the cell first and then read what the table says about both methods.")],
+    "prediction_robustness": [
+        ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
+        ("too short", WHOLE_ANSWER, "The noise."),
+        ("neither an outcome nor a reason", WHOLE_ANSWER,
+         "I would rather wait for the benchmark to tell me what happens in each of the worlds.")],
     "prediction_cells": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "About six cells.")],
