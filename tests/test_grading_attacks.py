@@ -220,6 +220,12 @@ def attacked(tmp_path_factory):
     canary = root / "outside" / "canary.txt"
     canary.parent.mkdir()
     attacked_submission(root / "student", canary)
+    # A genuine hand-in of lesson 13 (a fresh actor), so that own_agent_report, graded from
+    # files rather than a cell, must keep its points whatever the other cells attack.
+    from dlo_course.submission import SUBMISSION_DIR, write_submission
+    from test_course import fresh_run
+
+    write_submission(fresh_run(root / "run"), root / "student" / SUBMISSION_DIR)
     out = root / "grades.json"
     env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="8", DLO_COURSE_GRADING_MEMORY_MB="1024")
     proc = subprocess.run(grading_command(root / "student", json_out=out), cwd=REPO,
