@@ -716,9 +716,13 @@ def course_rubrics(solutions: Path | None) -> None:
 @click.option("--controller-cells", type=click.Choice(["with", "all"]), default="with",
               show_default=True,
               help="The controller's cells: those with reinitialisation, or all 24.")
+@click.option("--nodes", "node_counts", type=NODES, multiple=True,
+              help="Only the rows of this node count (repeatable; default: 2, 4 and 6, the "
+                   "whole table). Only these agents are needed, or trained with --train.")
 def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_steps: int | None,
               whole_database: str, retrain: bool, preset_name: str | None, seed: int,
-              time_mode: str, controller_name: str | None, controller_cells: str) -> None:
+              time_mode: str, controller_name: str | None, controller_cells: str,
+              node_counts: tuple[int, ...]) -> None:
     """Regenerate the paper's Table I and Figs. 4-5 beside the published numbers."""
     from dlo_course.evaluation import TrainedAgentError
     from dlo_course.reproduce import reproduce as run
@@ -738,7 +742,8 @@ def reproduce(out: Path, checkpoints: Path | None, episodes: int | None, max_ste
         report = run(out, checkpoints=checkpoints, episodes=episodes, max_steps=max_steps,
                      seed=seed, train_preset=preset_name if (retrain or smoke) else None,
                      time_mode=time_mode, whole_database=whole_database,
-                     controller=controller_name, controller_cells=controller_cells)
+                     controller=controller_name, controller_cells=controller_cells,
+                     nodes=node_counts or NODE_COUNTS)
     except (TrainedAgentError, DatabaseError, RunFileError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from None
     if report is not None:

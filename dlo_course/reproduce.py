@@ -53,9 +53,9 @@ class Cell:
         return (self.reinit, self.nodes, self.database, round(self.threshold, 4))
 
 
-def table1_cells() -> list[Cell]:
-    """The 24 settings in the paper's order."""
-    return [Cell(r, n, db, thr) for r in ("with", "without") for n in NODE_COUNTS
+def table1_cells(nodes: tuple[int, ...] = NODE_COUNTS) -> list[Cell]:
+    """The 24 settings in the paper's order (8 per node count: those of ``nodes`` only)."""
+    return [Cell(r, n, db, thr) for r in ("with", "without") for n in NODE_COUNTS if n in nodes
             for db in ("small", "large") for thr in TABLE_THRESHOLDS]
 
 
@@ -72,11 +72,12 @@ def read_paper_table(path: Path = PAPER_TABLE) -> dict[tuple, dict[str, float]]:
     return table
 
 
-def train_agents(preset_name: str, out: Path, seed: int = 0) -> Path:
-    """Train one agent per node count with a trainer preset; returns the folder of their run
-    directories (``out/checkpoints/nodes{2,4,6}``), which are trained agents."""
+def train_agents(preset_name: str, out: Path, seed: int = 0,
+                 nodes: tuple[int, ...] = NODE_COUNTS) -> Path:
+    """Train one agent per node count of ``nodes`` with a trainer preset; returns the folder
+    of their run directories (``out/checkpoints/nodes{2,4,6}``), which are trained agents."""
     root = Path(out) / "checkpoints"
-    for n in NODE_COUNTS:
+    for n in nodes:
         config = preset(preset_name, env_kwargs={"n_nodes": n}, seed=seed,
                         out_dir=str(agent_dir(root, n)))
         train(config, resume=True, progress=mpi.is_root())
@@ -308,7 +309,8 @@ PAPER_TRANSITIONS = 32 * 63 * 300
 def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
               max_steps: int = 30, seed: int = 0, train_preset: str | None = None,
               time_mode: str = "code", whole_database: str = "with",
-              controller: str | None = None, controller_cells: str = "with") -> Path | None:
+              controller: str | None = None, controller_cells: str = "with",
+              nodes: tuple[int, ...] = NODE_COUNTS) -> Path | None:
     """Regenerate Table I and Figs. 4-5 (see the module docstring); returns the report path
     on rank 0.
 
@@ -323,6 +325,9 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
             the report. None (default): the agents only.
         controller_cells: which cells the controller plays: "with" reinitialisation (the
             default: with the forked resets, a few minutes per run), or "all".
+        nodes: the node counts whose rows are made (default all three: the whole table);
+            only their agents are needed. Fig. 5 shows the 4-node agent, or the first of
+            ``nodes`` without it.
 
     Every finished evaluation run leaves its results in ``out/runs/``; running the same
     command again reuses them (for the same agents, episodes and seed), so a reproduction
@@ -338,25 +343,28 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
         if controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {sorted(CONTROLLERS)}, "
                              f"got {controller!r}")
+    nodes = tuple(sorted(set(int(n) for n in nodes)))
+    if not nodes or any(n not in NODE_COUNTS for n in nodes):
+        raise ValueError(f"nodes must be among {NODE_COUNTS}, got {nodes}")
     out = Path(out)
     paper = read_paper_table()
     if train_preset is not None:
-        checkpoints = train_agents(train_preset, out, seed)
+        checkpoints = train_agents(train_preset, out, seed, nodes)
     checkpoints = Path(checkpoints or AGENTS_DIR)
-    for n in NODE_COUNTS:  # a missing or wrong agent fails now, not after an hour of evaluation
+    for n in nodes:  # a missing or wrong agent fails now, not after an hour of evaluation
         load_actor(agent_dir(checkpoints, n), n)
     cache = out / "runs"
     rows = evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode, protocol="test",
-                          cache=cache)
+                          cells=table1_cells(nodes), cache=cache)
     scope = WHOLE_DATABASE_CELLS[whole_database]
-    whole_cells = [c for c in table1_cells() if scope is None or c.reinit == scope]
+    whole_cells = [c for c in table1_cells(nodes) if scope is None or c.reinit == scope]
     whole_rows = (evaluate_cells(checkpoints, episodes, max_steps, seed, time_mode,
                                  cells=whole_cells, protocol="whole", cache=cache)
                   if whole_cells else [])
     scope = WHOLE_DATABASE_CELLS[controller_cells]
     controller_rows = (evaluate_controller_cells(
         controller, episodes, max_steps, seed, time_mode, protocol="test", cache=cache,
-        cells=[c for c in table1_cells() if scope is None or c.reinit == scope])
+        cells=[c for c in table1_cells(nodes) if scope is None or c.reinit == scope])
         if controller is not None else [])
     if not mpi.is_root():
         return None
@@ -375,18 +383,21 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
                        f"Goals: {GOAL_PROTOCOLS['test']}; the same episodes as the agents'. "
                        f"A hand-made controller (`dlo_course/jacobian.py`), default "
                        f"settings. {_time_note(controller_rows)}."))
-    plot_learning_curves([agent_dir(checkpoints, n) for n in NODE_COUNTS],
+    plot_learning_curves([agent_dir(checkpoints, n) for n in nodes],
                          out=out / "fig4_learning_curves.png",
-                         labels=[f"{n} nodes" for n in NODE_COUNTS])
+                         labels=[f"{n} nodes" for n in nodes])
     fig5 = out / "fig5_deformation.png"
-    plot_deformation(agent_dir(checkpoints, 4), fig5, seed=seed, max_steps=max_steps,
+    plot_deformation(agent_dir(checkpoints, 4 if 4 in nodes else nodes[0]), fig5, seed=seed,
+                     max_steps=max_steps,
                      time_mode=time_mode)
-    records = {n: training_record(checkpoints, n) for n in NODE_COUNTS}
+    records = {n: training_record(checkpoints, n) for n in nodes}
     lines = [
         "# Table I, reproduced",
         "",
         f"Episodes per setting: {episodes} (the paper: 1000), at most {max_steps} actions each, "
-        f"goal draw seed {seed}, {mpi.size()} MPI rank(s).",
+        f"goal draw seed {seed}, {mpi.size()} MPI rank(s)."
+        + ("" if nodes == NODE_COUNTS else
+           f" Node counts: {', '.join(map(str, nodes))} only (`--nodes`)."),
         f"Time per action: `{time_mode}` ("
         + ("3 ms of physics per action, as in the authors' code" if time_mode == "code"
            else "0.06 s of physics per action, as in the paper's text") + ").",

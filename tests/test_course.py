@@ -230,15 +230,23 @@ def test_grader_fails_every_exercise_of_the_untouched_lessons(tmp_path):
     assert report["total"] == 0
 
 
+SUBMITTED_LESSONS = ("01_", "02_", "04_", "05_", "13_")
+"""The lessons alice and bob hand in to `course grade`: those where bob goes wrong (a full
+course for each costs 100 s more; test_grader_gives_full_points_to_the_solutions grades it
+all)."""
+
+
 def make_submissions(root: Path, handed_in: Path) -> None:
-    """alice: the solutions and lesson 13's hand-in. bob: no hand-in, one endless loop, one
-    syntax error, an exercise cell that lost its metadata (kept its comment), a missing
-    notebook, a crashing answer."""
+    """alice: the solutions of SUBMITTED_LESSONS and lesson 13's hand-in. bob: the same
+    lessons but 2 (a missing notebook), no hand-in, one endless loop, one syntax error, an
+    exercise cell that lost its metadata (kept its comment), a crashing answer."""
     alice, bob = root / "alice", root / "bob"
     alice.mkdir(parents=True)
     bob.mkdir(parents=True)
     hand_in(handed_in, alice)
     for path in NOTEBOOKS:
+        if not path.stem.startswith(SUBMITTED_LESSONS):
+            continue
         (alice / path.name).write_bytes(path.read_bytes())
         if path.stem.startswith("02_"):
             continue  # bob did not hand in lesson 2
@@ -280,12 +288,17 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
     with out.open(newline="") as f:
         rows = {row["student"]: row for row in csv.DictReader(f)}
     points = catalog()
+    handed = {e["exercise"] for e in notebooks.exercises(SOLUTIONS)
+              if e["notebook"].startswith(SUBMITTED_LESSONS)}
     assert list(rows) == ["alice", "bob"]
     alice = rows["alice"]
-    assert float(alice["total"]) == float(alice["max_total"]) == sum(points.values())
+    for name, value in points.items():
+        assert float(alice[name]) == (value if name in handed else 0), f"alice's {name}"
+    assert float(alice["max_total"]) == sum(points.values())
+    assert float(alice["total"]) == sum(points[n] for n in handed)
     bob = rows["bob"]
     lost = {"bellman_target", "discounted_return", "critic_loss", "RingBuffer", "prediction_ring",
-            "own_agent_report"}
+            "own_agent_report"} | (set(points) - handed)
     for name, value in points.items():
         expected = 0 if name in lost else value
         assert float(bob[name]) == expected, f"bob's {name}: {bob[name]}, expected {expected}"
@@ -475,8 +488,11 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
     nothing for the last lesson. Returns the points each student should get.
 
     Student i gives exercise j the answer (7 i + 3 j) mod 4 (unsolved, solved twice, wrong):
-    any 4 consecutive students give every exercise all four, so 8 students cover each
-    twice; more students only cost grading time."""
+    any 4 consecutive students give every exercise all four. An exercise whose answer calls
+    earlier ones (USES_EARLIER) is left unsolved by a student who did not get those right,
+    and is solved and answered wrongly in turn by those who did: the rotation alone gave
+    Critic and td3_update no right answer in the whole class. The test checks that every
+    exercise is solved, wrong and unsolved by someone."""
     from test_mutations import MUTANTS, mutate
 
     points = catalog()
@@ -487,6 +503,7 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
             if info:
                 solved[info["exercise"]] = notebooks.cell_source(cell)
     expected = {}
+    turns = {exercise: 0 for exercise in USES_EARLIER}  # right, then wrong, then right...
     for i in range(n_students):
         name = f"student{i:02d}"
         (root / name).mkdir(parents=True)
@@ -505,8 +522,12 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
                 exercise = info["exercise"]
                 j = list(points).index(exercise)
                 choice = (7 * i + 3 * j) % 4  # 0: unsolved, 1-2: solved, 3: a wrong answer
-                if any(chosen.get(d) not in (1, 2) for d in USES_EARLIER.get(exercise, ())):
-                    choice = 0  # its answer calls one this student did not get right
+                if exercise in USES_EARLIER:
+                    if any(chosen.get(d) not in (1, 2) for d in USES_EARLIER[exercise]):
+                        choice = 0  # its answer calls one this student did not get right
+                    else:
+                        choice = (1, 3)[turns[exercise] % 2]
+                        turns[exercise] += 1
                 chosen[exercise] = choice
                 got = 0
                 if choice in (1, 2):
@@ -517,7 +538,13 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
                     old, new = MUTANTS[exercise][0][1:3]
                     cell["source"] = mutate(solved[exercise], old, new).splitlines(keepends=True)
                 expected[name][exercise] = got
+                expected[name].setdefault("_answers", {})[exercise] = choice
             notebooks.write_notebook(nb, root / name / path.name)
+    answers = {name: points.pop("_answers") for name, points in expected.items()}
+    for exercise in answers["student00"]:  # the code exercises (written answers stay empty)
+        given = {("unsolved", "solved", "solved", "wrong")[a[exercise]]
+                 for a in answers.values() if exercise in a}
+        assert given == {"unsolved", "solved", "wrong"}, (exercise, given)
     return expected
 
 

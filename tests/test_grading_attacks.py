@@ -214,8 +214,8 @@ def attacked_submission(folder: Path, canary: Path) -> None:
         notebooks.write_notebook(nb, folder / path.name)
 
 
-@pytest.fixture(scope="module")
-def attacked(tmp_path_factory):
+@pytest.fixture(scope="session")  # session: xdist interleaves other modules' tests, and a
+def attacked(tmp_path_factory):    # module fixture was graded twice (68 s each)
     root = tmp_path_factory.mktemp("attacks")
     canary = root / "outside" / "canary.txt"
     canary.parent.mkdir()

@@ -24,6 +24,8 @@ def test_the_24_settings_match_the_papers_table():
     assert {c.key for c in cells} == set(paper)
     assert paper[("with", 4, "large", 0.05)]["done_percent"] == 97.2
     assert paper[("without", 6, "small", 0.05)]["mean_distance"] == 0.08669
+    some = table1_cells((6, 2))  # `reproduce --nodes`: those rows, in the paper's order
+    assert len(some) == 16 and [c for c in cells if c.nodes != 4] == some
 
 
 def test_table_sets_our_numbers_beside_the_papers(tmp_path):
@@ -76,11 +78,12 @@ def test_reproduce_flag_errors():
 @pytest.mark.mpi
 def test_cluster_script_runs_the_whole_pipeline_with_the_smoke_preset(tmp_path):
     """The SLURM script, outside SLURM, with the plain `mpiexec -hosts` launcher: smoke
-    training of the three agents on 2 ranks, then the 24 settings split over the ranks
-    (episodes of at most 5 actions: the pipeline, not the agents, is under test)."""
+    training on 2 ranks, then Table I's settings split over the ranks (episodes of at most 5
+    actions: the pipeline, not the agents, is under test). One node count (NODES_LIST, the
+    script's `reproduce --nodes`): the other two run the same code, and cost 4 minutes."""
     out = tmp_path / "paper"
     env = dict(os.environ, VENV=str(BIN.parent), PRESET="smoke", NTASKS="2", EPISODES="2",
-               MAX_STEPS="5", OUT=str(out),
+               MAX_STEPS="5", OUT=str(out), NODES_LIST="2",
                LAUNCH=f"{BIN / 'mpiexec'} -hosts localhost,localhost",
                PATH=f"{BIN}:{os.environ['PATH']}")
     subprocess.run(["bash", str(REPO / "scripts" / "cluster" / "paper.sbatch")], env=env,
@@ -88,14 +91,15 @@ def test_cluster_script_runs_the_whole_pipeline_with_the_smoke_preset(tmp_path):
     report = out / "report"
     with open(report / "table1.csv", newline="") as f:
         rows = list(csv.DictReader(f))
-    assert len(rows) == 24 and all(int(r["episodes"]) == 2 for r in rows)
+    assert len(rows) == 8 and all(int(r["episodes"]) == 2 and r["nodes"] == "2" for r in rows)
     with open(report / "table1_whole_database.csv", newline="") as f:
-        assert len(list(csv.DictReader(f))) == 12  # the cells with reinitialisation
+        assert len(list(csv.DictReader(f))) == 4  # the cells with reinitialisation
     for name in ("table1.md", "report.md", "fig4_learning_curves.png", "fig5_deformation.png"):
         assert (report / name).stat().st_size > 0
-    for n in (2, 4, 6):
-        assert (out / f"nodes{n}" / "actor.pt").is_file()
-    assert "| 2 | 2 | 2 x 20 |" in (report / "report.md").read_text()  # ranks, episodes x steps
+    assert [p.name for p in out.glob("nodes*")] == ["nodes2"]
+    assert (out / "nodes2" / "actor.pt").is_file()
+    text = (report / "report.md").read_text()
+    assert "| 2 | 2 | 2 x 20 |" in text and "Node counts: 2 only" in text  # ranks, episodes x steps
 
 
 def test_ship_run_copies_the_networks_and_writes_the_training_record(tmp_path):
@@ -171,7 +175,7 @@ def test_cli_reproduce_evaluates_a_controller_beside_the_agents(tmp_path, monkey
 
     cells = [reproduce.Cell("with", 2, "small", 0.05), reproduce.Cell("with", 2, "small", 0.03),
              reproduce.Cell("without", 2, "small", 0.05)]
-    monkeypatch.setattr(reproduce, "table1_cells", lambda: cells)
+    monkeypatch.setattr(reproduce, "table1_cells", lambda nodes=(2,): cells)
     monkeypatch.setattr(reproduce, "plot_deformation",
                         lambda agent, out, **kwargs: Path(out).write_bytes(b""))
     out = tmp_path / "report"
