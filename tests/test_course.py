@@ -662,3 +662,28 @@ def test_parallel_grading_gives_the_serial_csv_and_feedback(tmp_path):
     with (tmp_path / "jobs2" / "grades.csv").open(newline="") as f:
         totals = {row["student"]: float(row["total"]) for row in csv.DictReader(f)}
     assert totals["bob"] == 0 and totals["ann"] == totals["cy"] > 0
+
+
+def test_a_class_shares_the_mpi_reference_and_reads_it(tmp_path):
+    """`course grade` computes the MPI reference of sum_gradients_over_ranks once for the
+    class (two MPI launches, about 10 s a student): the first grader leaves it as plain data,
+    the next reads it. Proof that it is read: a tampered reference costs a right answer its
+    points."""
+    from dlo_course.grading.grade import grade_folder
+
+    lesson = next(p for p in NOTEBOOKS if p.stem.startswith("08_"))
+    student = tmp_path / "ann"
+    student.mkdir()
+    shutil.copy(lesson, student / lesson.name)
+    shared = tmp_path / "references"
+    shared.mkdir()
+    first = grade_folder(student, reference_cache=shared)
+    earned = {e["exercise"]: e["earned"] for e in first["exercises"]}
+    assert earned["sum_gradients_over_ranks"] == 3, first["output"][-3000:]
+    (kept,) = shared.glob("*.json")
+    assert len(json.loads(kept.read_text())) == 2  # one result per rank
+    kept.write_text("[]")  # no rank's result: a grader that reads it cannot match
+    second = grade_folder(student, reference_cache=shared)
+    earned = {e["exercise"]: e["earned"] for e in second["exercises"]}
+    assert earned["sum_gradients_over_ranks"] == 0
+    assert earned["pack_gradients"] == 1  # only the MPI reference is shared

@@ -34,9 +34,19 @@ def grading_command(notebooks: str | Path, tests: str | Path = GRADING_TESTS_DIR
     return cmd
 
 
+REFERENCE_CACHE_VARIABLE = "DLO_COURSE_REFERENCE_CACHE"
+"""A folder where the grader keeps the references that need real MPI processes, shared by
+the students of one ``course grade`` (``tests/grading/conftest.py``): the same for every
+student, and each costs two MPI launches (about 10 s)."""
+
+
 def grade_folder(notebooks: str | Path, tests: str | Path = GRADING_TESTS_DIR,
-                 timeout: float = 1800) -> dict[str, Any]:
+                 timeout: float = 1800, reference_cache: str | Path | None = None
+                 ) -> dict[str, Any]:
     """Grade one folder of notebooks in a pytest subprocess.
+
+    ``reference_cache``: a folder the graders of a class share for the references they
+    compute in MPI processes (:data:`REFERENCE_CACHE_VARIABLE`); None: each computes its own.
 
     Returns:
         The grader's JSON report (``exercises``: notebook, exercise, points, earned, outcome;
@@ -47,6 +57,8 @@ def grade_folder(notebooks: str | Path, tests: str | Path = GRADING_TESTS_DIR,
         report_path = Path(tmp) / "grades.json"
         env = dict(os.environ, MPLBACKEND="Agg", DLO_COURSE_FAST="1",
                    DLO_COURSE_OUTPUT=str(Path(tmp) / "output"))
+        if reference_cache is not None:
+            env[REFERENCE_CACHE_VARIABLE] = str(reference_cache)
         try:
             proc = subprocess.run(grading_command(notebooks, tests, report_path),
                                   capture_output=True, text=True, timeout=timeout,
@@ -108,9 +120,10 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     # Threads are enough: each student is graded by its own processes, the threads only wait.
     reports: list[dict[str, Any]] = [{}] * len(students)
     with ThreadPoolExecutor(max_workers=max(1, int(jobs))) as pool, \
+            tempfile.TemporaryDirectory(prefix="dlo-grading-references-") as shared, \
             tqdm(total=len(students), unit="student", desc="grading",
                  disable=not progress, file=sys.stderr) as bar:
-        futures = {pool.submit(grade_folder, student, tests, timeout): i
+        futures = {pool.submit(grade_folder, student, tests, timeout, shared): i
                    for i, student in enumerate(students)}
         for future in as_completed(futures):
             reports[futures[future]] = future.result()
