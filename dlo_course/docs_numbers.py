@@ -18,6 +18,8 @@ and holds exactly what :data:`BLOCKS` renders for its name from the repository's
   ``config.json``): the preset named in the training command, ranks, episodes,
   transitions, which actor was shipped, the training threshold and episode ending;
 * ``ablation``: the table of ``benchmarks/results/ablation/README.md``;
+* ``seeds``: Table I's cells with reinitialisation over training seeds, per node count, the
+  tables of ``benchmarks/results/seeds/nodesN.md`` (``benchmarks/seeds_table1.py``);
 * ``database``: our small database against the authors'
   (``benchmarks/results/database_vs_authors.txt``);
 * ``speed``: ``benchmarks/results/bench_env.txt`` and ``dlo_train_throughput.txt``;
@@ -212,6 +214,18 @@ def ablation_markdown(root: Path = REPO_ROOT) -> str:
     return "\n".join(_table_lines(text)) + "\n"
 
 
+def seeds_markdown(root: Path = REPO_ROOT) -> str:
+    """The over-seeds tables of ``benchmarks/seeds_table1.py report``, one per node count that
+    has one (variants, ``nodesN_NAME.md``, are left to their files)."""
+    parts = []
+    for nodes in (2, 4, 6):
+        path = root / "benchmarks/results/seeds" / f"nodes{nodes}.md"
+        if path.is_file():
+            parts.append(f"{nodes} nodes, with reinitialisation, on the paper's test goals:\n\n"
+                         + "\n".join(_table_lines(path.read_text())) + "\n")
+    return "\n".join(parts)
+
+
 def database_markdown(root: Path = REPO_ROOT) -> str:
     """Our small database against the authors' file (``benchmarks/database_vs_authors.py``)."""
     text = (root / "benchmarks/results/database_vs_authors.txt").read_text()
@@ -300,6 +314,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "table1": table1_markdown,
     "agents": agents_markdown,
     "ablation": ablation_markdown,
+    "seeds": seeds_markdown,
     "database": database_markdown,
     "speed": speed_markdown,
     "reproduction-time": reproduction_time_markdown,

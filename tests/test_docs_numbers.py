@@ -20,7 +20,7 @@ from dlo_course.docs_numbers import BLOCKS, DOCS, REPO_ROOT, blocks_in, render
 
 README_BLOCKS = {"table1", "agents", "course-size"}
 LESSONS_BLOCKS = {"exercises", "course-size"}
-DESIGN_BLOCKS = {"ablation", "database", "speed", "reproduction-time"}
+DESIGN_BLOCKS = {"ablation", "seeds", "database", "speed", "reproduction-time"}
 
 
 def _text(name: str) -> str:
