@@ -138,7 +138,8 @@ def report(nodes: int, variant: str | None = None) -> str:
             row = next(r for r in manifest[s]["rows"] if tuple(r["cell"]) == cell.key)
             per_seed.append(row)
         done = [r["done_percent"] for r in per_seed]
-        mean, low, high = seed_interval(done)
+        # One seed (a variant's first): no spread between seeds to measure, the episodes' only.
+        mean, low, high = seed_interval(done) if len(done) > 1 else (done[0],) * 3
         episodes = sum(r["episodes"] for r in per_seed)
         successes = round(sum(r["done_percent"] * r["episodes"] / 100 for r in per_seed))
         pooled_low, pooled_high = (100 * x for x in wilson_interval(successes, episodes))
@@ -150,8 +151,9 @@ def report(nodes: int, variant: str | None = None) -> str:
         lines.append(f"| {cell.database} | {cell.threshold:g} | "
                      + " | ".join(f"{r['done_percent']:.0f} [{r['done_ci_low']:.0f}, "
                                   f"{r['done_ci_high']:.0f}]" for r in per_seed)
-                     + f" | {mean:.1f} [{max(low, 0):.1f}, {min(high, 100):.1f}] | "
-                     f"{100 * successes / episodes:.1f} [{pooled_low:.1f}, {pooled_high:.1f}] | "
+                     + (f" | {mean:.1f} [{max(low, 0):.1f}, {min(high, 100):.1f}] | "
+                        if len(done) > 1 else f" | {mean:.1f} [one seed] | ")
+                     + f"{100 * successes / episodes:.1f} [{pooled_low:.1f}, {pooled_high:.1f}] | "
                      f"{paper_done:g} | {where} |")
         table.append({"nodes": nodes, "database": cell.database, "threshold": cell.threshold,
                       **{f"seed{s}_done_percent": r["done_percent"] for s, r in zip(seeds, per_seed)},
@@ -245,8 +247,9 @@ def main(argv: list[str] | None = None) -> None:
         if not folder or not seed.isdigit():
             parser.error(f"--agent wants SEED=FOLDER, got {item!r}")
         agents[int(seed)] = Path(folder)
-    if len(agents) < 2:
-        parser.error("give at least two --agent SEED=FOLDER: an interval over seeds needs two")
+    if len(agents) < (1 if args.variant else 2):
+        parser.error("give at least two --agent SEED=FOLDER: an interval over seeds needs two "
+                     "(a --variant may start with one)")
     if args.command == "validate":
         validate(args.nodes, agents, args.variant)
         return
