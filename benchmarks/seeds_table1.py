@@ -123,7 +123,8 @@ def report(nodes: int, variant: str | None = None) -> str:
              f"{MAX_STEPS} actions), made by `mpiexec -n 2 python benchmarks/seeds_table1.py run "
              f"--nodes {nodes}{f' --variant {variant}' if variant else ''} ...` (the module "
              f"docstring). Per seed: done % [95% Wilson interval "
-             f"over the episodes]. Over seeds: mean [95% t-interval over the {len(seeds)} seeds]; "
+             f"over the episodes]. Over seeds: mean [95% t-interval over the {len(seeds)} seeds"
+             f"{'' if len(seeds) > 1 else ': none with one seed'}]; "
              f"pooled: all seeds' episodes [95% Wilson interval; the seeds play the same goals]. "
              f"The verdict (ours above, within or below the paper) compares the paper's number "
              f"with the union of the two intervals.",
