@@ -32,6 +32,18 @@ The 6-node seeds were trained with the shipped 6-node agent's configuration
         --stop-at-goal --validate-every 0 --episodes 130 --seed S --out runs/recipe_n6_sS
     dlo-course ship runs/recipe_n6_sS data/checkpoints/seeds/nodes6_seedS
 
+A variant (one lever changed) is trained the same way with its flag and its own --out, and
+evaluated with ``--variant NAME`` (results in ``nodesN_NAME.*``). The first, OU sigma 0.3
+(the paper's) instead of 0.15, seed S (seed 0 is in data/checkpoints/seeds/):
+
+    mpiexec -n 2 dlo-course train --preset recipe --nodes 6 --env-kwargs '{"threshold": 0.05}' \
+        --stop-at-goal --validate-every 0 --episodes 130 --noise-sigma 0.3 --seed S \
+        --out runs/recipe_n6_sigma03_sS
+    dlo-course ship runs/recipe_n6_sigma03_sS data/checkpoints/seeds/nodes6_sigma0.3_seedS
+    mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 6 --variant sigma0.3 \
+        --what "OU noise sigma 0.3 (the paper's) instead of 0.15" \
+        --agent 0=data/checkpoints/seeds/nodes6_sigma0.3_seed0 --agent S=...
+
 Each agent's evaluation is cached in ``benchmarks/results/seeds/cache`` under its actor's
 digest (the cache of ``dlo-course reproduce``), so a stopped run resumes at the agent it was in
 and a report can be rebuilt on any machine. ``report`` writes
