@@ -214,11 +214,11 @@ def attacked_submission(folder: Path, canary: Path) -> None:
         notebooks.write_notebook(nb, folder / path.name)
 
 
-@pytest.fixture(scope="session")  # session: xdist interleaves other modules' tests, and a
-def attacked(tmp_path_factory):    # module fixture was graded twice (68 s each)
-    root = tmp_path_factory.mktemp("attacks")
+def grade_attacked(root: Path) -> dict:
+    """Grade a student whose cells attack the grader (in ``root``); the report, with the
+    grader's output and the canary that no attack may write."""
     canary = root / "outside" / "canary.txt"
-    canary.parent.mkdir()
+    canary.parent.mkdir(parents=True)
     attacked_submission(root / "student", canary)
     # A genuine hand-in of lesson 13 (a fresh actor), so that own_agent_report, graded from
     # files rather than a cell, must keep its points whatever the other cells attack.
@@ -233,7 +233,29 @@ def attacked(tmp_path_factory):    # module fixture was graded twice (68 s each)
     assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     report = json.loads(out.read_text())
     report["output"] = proc.stdout + proc.stderr
-    report["canary"] = canary
+    report["canary"] = str(canary)
+    return report
+
+
+@pytest.fixture(scope="session")
+def attacked(tmp_path_factory):
+    """The attacked student's grades, made once for the whole run: under pytest-xdist every
+    worker that runs one of these tests would grade it again (70 s each; the loadgroup
+    scheduler does not keep this module's tests together with pytest 9), so the workers
+    share it through a file under their common temporary folder, behind a lock."""
+    from filelock import FileLock  # a dependency of torch
+
+    shared = tmp_path_factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        shared = shared.parent  # one folder per worker, under the run's folder
+    kept = shared / "attacked_grades.json"
+    with FileLock(str(kept) + ".lock"):
+        if kept.is_file():
+            report = json.loads(kept.read_text())
+        else:
+            report = grade_attacked(shared / "attacks")
+            kept.write_text(json.dumps(report))
+    report["canary"] = Path(report["canary"])
     return report
 
 
