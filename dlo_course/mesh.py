@@ -15,6 +15,14 @@ The paper's soft object is a 1.55 m cylinder of radius 0.025 m meshed with 200 n
 That gives 30 x 12 + 2 x 16 = 392 tetrahedra and, with the end fans, 396 surface triangles
 and 789 edges, the counts of the paper's Gmsh mesh.
 
+Which diagonal cuts each side quad does not change these counts, but it does change the
+rod's stiffness pattern. The shipped mesh (``cuts="course"``) repeats one cut pattern in
+every layer. The authors' Gmsh file cuts each quad through the lowest-numbered of its nodes
+too, but Gmsh numbered every odd ring after both its neighbours, so each layer is the mirror
+image of the next (``cuts="mirrored"`` does that; within a ring Gmsh's corner order varies
+with no pattern, so 182 of their 392 tetrahedra are those of ``"mirrored"``, 134 of
+``"course"``; docs/design.md).
+
 Node numbering: ``0`` bottom centre, ``1`` top centre, then ring ``k``, corner ``j`` (at
 angle ``j * 60°`` from +x) is node ``2 + 6 k + j``. The paper selects nodes on the +x surface
 line (corner 0), named here by ring: :func:`node_of_ring`.
@@ -100,19 +108,21 @@ class TetMesh:
                                        p[:, 3] - p[:, 0]], axis=1)) / 6.0
 
 
-def _split_prism(bottom: tuple[int, int, int], top: tuple[int, int, int]) -> list[tuple]:
+def _split_prism(bottom: tuple[int, int, int], top: tuple[int, int, int],
+                 rank: np.ndarray) -> list[tuple]:
     """Cut a triangular prism into 3 tetrahedra, consistently with its neighbours.
 
-    Each quadrilateral side face is cut along the diagonal through its smallest node index.
-    Two prisms sharing a face then cut it the same way, so the mesh is conforming, and the
-    three cuts of one prism never form a cycle, so the split always exists.
+    Each quadrilateral side face is cut along the diagonal through its lowest-ranked node
+    (``rank``: (N,) int, one distinct rank per node). Two prisms sharing a face then cut it the
+    same way, so the mesh is conforming, and the three cuts of one prism never form a cycle,
+    so the split always exists.
     """
     ids = list(bottom) + list(top)  # ids[i + 3] sits above ids[i]
-    first = int(np.argmin(ids))
-    # Relabel the prism so that its smallest node is local corner 0 of the bottom triangle.
+    first = int(np.argmin(rank[ids]))
+    # Relabel the prism so that its lowest-ranked node is local corner 0 of the bottom triangle.
     base = first % 3
     order = [base, (base + 1) % 3, (base + 2) % 3]
-    if first >= 3:  # the smallest node is on top: flip the prism upside down
+    if first >= 3:  # the lowest-ranked node is on top: flip the prism upside down
         b = [ids[i + 3] for i in order]
         t = [ids[i] for i in order]
     else:
@@ -123,17 +133,41 @@ def _split_prism(bottom: tuple[int, int, int], top: tuple[int, int, int]) -> lis
     # Both faces touching v0 are cut through v0: the first tetrahedron is v0 + top triangle.
     tets = [(v0, w0, w1, w2)]
     # The remaining pyramid has apex v0 over the quad (v1, v2, w2, w1).
-    if min(v1, w2) < min(v2, w1):  # diagonal v1-w2
+    if min(rank[v1], rank[w2]) < min(rank[v2], rank[w1]):  # diagonal v1-w2
         tets += [(v0, v1, v2, w2), (v0, v1, w2, w1)]
     else:  # diagonal v2-w1
         tets += [(v0, v1, v2, w1), (v0, v2, w2, w1)]
     return tets
 
 
-def make_rod_mesh(length: float = 1.55, radius: float = 0.025) -> TetMesh:
-    """Build the paper's rod: 200 nodes, 392 tetrahedra, 789 edges, 396 surface triangles."""
+def _cut_ranks(cuts: str) -> np.ndarray:
+    """(200,) rank of every node for the "diagonal through the lowest rank" rule.
+
+    ``"course"``: the node index, ring after ring, so every layer is cut the same way.
+    ``"mirrored"``: all even rings rank before all odd rings, so every layer's cuts go through
+    its even ring and each layer is the mirror image of its neighbour across their shared ring.
+    The authors' Gmsh file follows this rule (every odd ring is numbered after both its
+    neighbours), though within a ring Gmsh's corner order varies where ours does not.
+    """
+    index = np.arange(2 + RING_CORNERS * N_RINGS)
+    if cuts == "course":
+        return index
+    if cuts == "mirrored":
+        ring = np.maximum(index - 2, 0) // RING_CORNERS
+        odd = (index >= 2) & (ring % 2 == 1)
+        return index + odd * len(index)  # odd rings after every even ring, order kept
+    raise ValueError(f"cuts must be 'course' or 'mirrored', got {cuts!r}")
+
+
+def make_rod_mesh(length: float = 1.55, radius: float = 0.025, cuts: str = "course") -> TetMesh:
+    """Build the paper's rod: 200 nodes, 392 tetrahedra, 789 edges, 396 surface triangles.
+
+    ``cuts`` chooses which diagonal cuts every side quad (see :func:`_cut_ranks`): ``"course"``
+    (the shipped ``data/rod.vtk``) or ``"mirrored"`` (the authors' pattern of cuts).
+    """
     if length <= 0 or radius <= 0:
         raise ValueError("length and radius must be positive")
+    rank = _cut_ranks(cuts)
     angles = np.arange(RING_CORNERS) * (2 * np.pi / RING_CORNERS)
     points = [(0.0, 0.0, 0.0), (0.0, 0.0, length)]
     for k in range(N_RINGS):
@@ -148,15 +182,15 @@ def make_rod_mesh(length: float = 1.55, radius: float = 0.025) -> TetMesh:
         for tri in HEXAGON_TRIANGLES:
             bottom = tuple(node_of_ring(k, c) for c in tri)
             top = tuple(node_of_ring(k + 1, c) for c in tri)
-            tets += _split_prism(bottom, top)
+            tets += _split_prism(bottom, top, rank)
     # End layers: a flat end face cannot hold a tetrahedron (centre and ring are coplanar),
     # so the centre instead sees the whole layer next to it.
     for centre, near, far in ((0, 0, 1), (1, last, last - 1)):
         for j in range(RING_CORNERS):
             a, b = node_of_ring(near, j), node_of_ring(near, (j + 1) % RING_CORNERS)
             c, d = node_of_ring(far, j), node_of_ring(far, (j + 1) % RING_CORNERS)
-            # Cut the side quad (a, b, d, c) along the diagonal through its smallest node.
-            if min(a, d) < min(b, c):
+            # Cut the side quad (a, b, d, c) along the diagonal through its lowest-ranked node.
+            if min(rank[a], rank[d]) < min(rank[b], rank[c]):
                 tets += [(centre, a, b, d), (centre, a, d, c)]
             else:
                 tets += [(centre, a, b, c), (centre, b, d, c)]
