@@ -52,3 +52,18 @@ def bench_env(steps: int = 40, paper_steps: int = 4, seed: int = 0) -> list[dict
     print(f"'paper' time costs {ratio:.1f}x the compute of 'code' time per action "
           "(0.06 s vs 0.003 s of physics).")
     return results
+
+
+def publish(lines: list[str], out=None) -> str:
+    """Print a benchmark's result, the command that made it first, and append it to ``out``
+    (a path, or None) so that a results file keeps every run with its command."""
+    import shlex
+    import sys
+    from pathlib import Path
+
+    text = "\n".join([f"$ python {shlex.join(sys.argv)}", "", *lines]) + "\n"
+    print(text)
+    if out is not None:
+        with Path(out).open("a") as f:
+            f.write(text + "\n")
+    return text

@@ -403,9 +403,10 @@ def _record_authors_sweep(scene, box: Box, limit: int | None, record) -> None:
     scene.step_physics(SWEEP_STEPS_BEFORE)
     recorded = 0
     for move, is_recorded in zip(sweep.moves, sweep.recorded):
-        # Each target starts from where the tip *is*, not where it was sent: the authors'
-        # tip drifts a little from the grid, and so do the goals.
-        scene.command_tip_plain_ik(scene.tip_position() + move)
+        # Each target starts from where the tip *is* (as the last step left it), not where it
+        # was sent, and is clipped to the tip workspace, whose top is the initial height: the
+        # authors' tip drifts a little from the grid, and so do the goals, but never upwards.
+        scene.command_tip_plain_ik(scene.clip_to_workspace(scene.tip_position() + move))
         if not is_recorded:
             scene.step_physics(SWEEP_STEPS_PER_START_MOVE)
             continue

@@ -22,6 +22,11 @@ and holds exactly what :data:`BLOCKS` renders for its name from the repository's
   tables of ``benchmarks/results/seeds/nodesN.md`` (``benchmarks/seeds_table1.py``);
 * ``database``: our small database against the authors'
   (``benchmarks/results/database_vs_authors.txt``);
+* ``fidelity``: the committed databases against the authors' sweeps, record by record
+  (:mod:`dlo_course.fidelity` on ``data/databases/{small,large}.npz``);
+* ``tip-reads`` and ``before-after``: what reading the tip with forward kinematics changes,
+  and the scene before and after issue 35 (``benchmarks/results/tip_reads.txt``,
+  ``scene_before_after.txt``);
 * ``speed``: ``benchmarks/results/bench_env.txt`` and ``dlo_train_throughput.txt``;
 * ``reproduction-time``: the protocol summary of ``benchmarks/results/reproduction_time.txt``;
 * ``exercises`` and ``course-size``: the graded items of every lesson and their points, and the
@@ -233,6 +238,32 @@ def database_markdown(root: Path = REPO_ROOT) -> str:
     return "\n".join(_table_lines(text) + [""] + summary) + "\n"
 
 
+def fidelity_markdown(root: Path = REPO_ROOT) -> str:
+    """The committed databases against the authors' sweeps, record by record
+    (:mod:`dlo_course.fidelity`, computed from the files themselves)."""
+    from dlo_course.database import load_database
+    from dlo_course.fidelity import compare_with_authors
+
+    lines = ["| database | records | mean (mm) | median (mm) | max (mm) | mean per level, "
+             "from the initial height down (mm) |", "|---|---|---|---|---|---|"]
+    for box in ("small", "large"):
+        rows = compare_with_authors(
+            load_database(root / "data/databases" / f"{box}.npz").goals(4), box)
+        levels = ", ".join(f"{r.mean * 1e3:.1f}" for r in rows[:-1])
+        total = rows[-1]
+        lines.append(f"| `{box}` | {_n(total.records)} | {total.mean * 1e3:.1f} | "
+                     f"{total.median * 1e3:.1f} | {total.max * 1e3:.1f} | {levels} |")
+    return "\n".join(lines) + "\n"
+
+
+def _result_table(name: str) -> Callable[[Path], str]:
+    """A block that is the Markdown table of ``benchmarks/results/<name>``."""
+    def render(root: Path = REPO_ROOT) -> str:
+        return "\n".join(_table_lines((root / "benchmarks/results" / name).read_text())) + "\n"
+    render.__doc__ = f"The table of ``benchmarks/results/{name}``."
+    return render
+
+
 def speed_markdown(root: Path = REPO_ROOT) -> str:
     """Actions and transitions per second (``dlo-course bench env``,
     ``benchmarks/dlo_train_throughput.py``)."""
@@ -316,6 +347,9 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "ablation": ablation_markdown,
     "seeds": seeds_markdown,
     "database": database_markdown,
+    "fidelity": fidelity_markdown,
+    "tip-reads": _result_table("tip_reads.txt"),
+    "before-after": _result_table("scene_before_after.txt"),
     "speed": speed_markdown,
     "reproduction-time": reproduction_time_markdown,
 }

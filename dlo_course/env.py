@@ -140,9 +140,9 @@ class DLOShapeEnv(gym.Env):
         before the first observation, as the authors' reset did
         (``SimParams.reset_settle_steps``, ``rebuild_settle_steps``; 0 and 0 give the first
         round's behaviour);
-      - edge damping: the rod carries a 1 N·s/m dashpot (and a 1 N/m spring) on every mesh
-        edge, which PyBullet had been adding unasked (``SimParams.edge_damping``; 0 removes
-        them; ``params=AUTHORS_SETTINGS`` is the authors' code's settings, docs/design.md);
+      - the authors' rod: no edge dampers (``SimParams.edge_damping`` = 0; the course's rods
+        had 1 N·s/m until issue 35), and the tip read as the last physics step left it,
+        without forward kinematics, as the authors read it (docs/design.md, "The scene");
       - the step limit is only ``TimeLimit``'s: the environment no longer takes a
         ``max_episode_steps`` of its own.
     """

@@ -19,7 +19,9 @@ if TYPE_CHECKING:
     from dlo_course.simulation import SimParams
 
 PERTURBABLE = ("youngs_modulus", "mass", "damping", "edge_damping")
-"""The :class:`~dlo_course.simulation.SimParams` fields that can be scaled by a factor."""
+"""The :class:`~dlo_course.simulation.SimParams` fields that can be scaled by a factor.
+``edge_damping`` is 0 by default (the authors' rod has no dampers), so a factor on it changes
+nothing unless the base ``params`` give it a value, e.g. ``SimParams(edge_damping=1.0)``."""
 
 
 # ------------------------------------------------------------------ model mismatch

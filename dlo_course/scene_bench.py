@@ -50,7 +50,7 @@ class Switches:
     them the rod gets whatever the command buffer holds: hidden edge dampers after
     ``setJointMotorControlArray`` (``motors_before_rod``), as RodScene had before issue 10."""
     edge_damping: float = 0.0
-    """Edge dampers (N s/m) when ``spring_args``; the course's default is 1.0."""
+    """Edge dampers (N s/m) when ``spring_args``; the course's default is 0 (it was 1.0)."""
     self_collision: bool = True
     """Rod self-collision (on in the authors' code and the course)."""
     filter_arm: bool = False
@@ -104,6 +104,7 @@ class AuthorsScene:
                                 useFixedBase=True, physicsClientId=c)
         for joint, q in enumerate(prm.initial_joints):
             p.resetJointState(self.panda, joint, q, physicsClientId=c)
+        self.stepped = False
         tip, self.initial_orientation = self._tip()
         low, high = np.asarray(prm.workspace_low), np.asarray(prm.workspace_high)
         self.workspace = (tip + low, tip + high)
@@ -156,7 +157,10 @@ class AuthorsScene:
                                     physicsClientId=self.client)
 
     def _tip(self) -> tuple[np.ndarray, tuple]:
-        state = p.getLinkState(self.panda, self.params.tip_link, computeForwardKinematics=True,
+        # As the authors read it: the link state the last step left (forward kinematics only
+        # before the first step, after resetJointState).
+        state = p.getLinkState(self.panda, self.params.tip_link,
+                               computeForwardKinematics=int(not self.stepped),
                                physicsClientId=self.client)
         return np.array(state[4]), state[5]
 
@@ -173,6 +177,7 @@ class AuthorsScene:
                                               **self.ik_args)
         self._set_targets(joints[:7])
         p.stepSimulation(physicsClientId=self.client)
+        self.stepped = True
 
     def nodes(self) -> np.ndarray:
         _, vertices = p.getMeshData(self.rod, -1, flags=p.MESH_DATA_SIMULATION_MESH,
@@ -254,8 +259,9 @@ def scene_rows(switch_table: bool = False, knob_table: bool = False,
     authors_name = ("authors' settings (all contacts on)" if plane_contact
                     else "authors' settings (rod-plane contact off)")
     rows: dict[str, object] = {
-        "course: RodScene (edge_damping=1)": lambda: CourseScene(),
-        "course, edge_damping=0 (no dampers)": lambda: CourseScene(SimParams(edge_damping=0.0)),
+        "course: RodScene (no dampers)": lambda: CourseScene(),
+        "course, edge_damping=1 (the old dampers)":
+            lambda: CourseScene(SimParams(edge_damping=1.0)),
     }
     if switch_table:
         without = {"gripper filter": "filter_gripper", "plane filter": "filter_plane",

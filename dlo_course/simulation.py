@@ -112,14 +112,12 @@ class SimParams:
     """Collision margin of the rod (m), as in the authors' code."""
     self_collision: bool = True
     """Rod self-collision, as in the authors' code."""
-    edge_damping: float = 1.0
+    edge_damping: float = 0.0
     """Damping (N s/m) of a dashpot along every mesh edge (PyBullet's mass-spring force, with
-    1 N/m springs). Not in the authors' code: PyBullet gave every rod of this course these
-    dampers unasked (after a joint-motor command it reads that command's gains as spring
-    constants), and they are kept because, of everything measured, they bring our sweep
-    closest to the authors' database: 8 mm per node mean with them, 36 mm without
-    (docs/design.md, "The scene", where the measurements are). 0 steps about 1.6 times as
-    fast."""
+    1 N/m springs). Not the authors': their rod has no edge springs or dampers (FACTS.md, last
+    section). An option for lessons and benchmarks; the course's rods had 1.0 until the
+    authors' sweep was found to clip its targets and read the tip as the last step left it
+    (docs/design.md, "The scene"). A positive value steps about 1.6 times slower."""
     anchors: Literal["authors", "nodes"] = "nodes"
     """How the rod's ends are held. "nodes": node 0 to the world (its mass set to 0) and node 1
     to the flange, where they are at load time. "authors": node 0 to the plane body and node 1
@@ -128,9 +126,10 @@ class SimParams:
     with the rod-plane contact on, which blows up with "nodes" and stays stable with
     "authors"."""
     plane_contact: bool = False
-    """Rod-plane contact. On in the authors' code, but here, with "authors" anchors and their
-    mesh or ours, it clamps the bottom ring and moves the sweep 70-190 mm from their database
-    (measured, docs/design.md); off by default."""
+    """Rod-plane contact with PyBullet's bundled ``plane.urdf``, a 200 x 200 x 10 m collision
+    box. Not the authors': their plane URDF has a visual mesh and no collision shape, so their
+    rod never touches the ground. On, the contact clamps the bottom ring and moves the sweep
+    70-190 mm from their files (docs/design.md, "The scene"); an option, off by default."""
     gripper_contact: bool = False
     """Contact between the gripper (flange, hand, fingers) and the rod; on in the authors'
     code. The hand overlaps the rod's top: with "nodes" anchors the contact pushed the top
@@ -234,12 +233,11 @@ class SimParams:
         return replace(self, **changes)
 
 
-AUTHORS_SETTINGS: dict = dict(edge_damping=0.0, anchors="authors", plane_contact=True,
-                              gripper_contact=True, finger_opening=0.08)
-"""The authors' code's scene settings, as ``SimParams`` overrides: no edge dampers, node 0
-anchored to the plane body, every contact on, fingers open. About 1.6 times as fast as the
-default in the environment, but its sweep lands 80-160 mm (per node mean, x) from the authors'
-own database with our mesh, and 70-140 mm with theirs (docs/design.md, "The scene")."""
+AUTHORS_SETTINGS: dict = dict(anchors="authors", gripper_contact=True, finger_opening=0.08)
+"""The switches where the authors' scene differs from the default, as ``SimParams``
+overrides: node 0 anchored to the plane body, the gripper touching the rod, the fingers open.
+Their rod has no dampers and no ground contact, as the default. None of these three moves the
+sweep by 0.1 mm (FACTS.md, last section); they are here to be shown, not needed."""
 
 
 def sim_params(value: "SimParams | dict | None") -> "SimParams":
@@ -300,6 +298,7 @@ class RodScene:
         self.initial_tip = np.zeros(3)
         self.tip_orientation = (0.0, 0.0, 0.0, 1.0)
         self._ik_limits: dict = {}
+        self._stepped = False
         self.build()
 
     # ------------------------------------------------------------------ world
@@ -356,6 +355,7 @@ class RodScene:
         # path always gives the same arm motion instead of drifting through the null space.
         self._ik_limits = nullspace_ik_args(self.panda, prm.initial_joints, c)
         self.timings.reset()
+        self._stepped = False  # nothing stepped since the joints were set: reads need FK
 
     def _anchor_rod(self) -> None:
         """Node 0 (bottom centre) to the ground, node 1 (top centre) to the flange.
@@ -386,18 +386,27 @@ class RodScene:
             self.client = -1
 
     # ---------------------------------------------------------------- reading
+    def _tip_link_state(self, velocity: bool = False) -> tuple:
+        """``getLinkState`` of the tip as the last physics step left it, as the authors read it.
+
+        Forward kinematics is computed only before the first step after a build, when
+        ``resetJointState`` has moved the joints and nothing has updated the links yet. After
+        a step it is not: it would recompute the arm's link transforms between two steps, and
+        the rod, anchored to the flange, would then follow another path (10-25 mm per level
+        deep in the large sweep; docs/design.md, "The scene")."""
+        return p.getLinkState(self.panda, self.params.tip_link, computeLinkVelocity=int(velocity),
+                              computeForwardKinematics=int(not self._stepped),
+                              physicsClientId=self.client)
+
     def tip_position(self) -> np.ndarray:
-        """(3,) world position of the tip (flange origin), m."""
-        return np.array(p.getLinkState(self.panda, self.params.tip_link,
-                                       computeForwardKinematics=True,
-                                       physicsClientId=self.client)[4])
+        """(3,) world position of the tip (flange origin), m, as the last step left it."""
+        return np.array(self._tip_link_state()[4])
 
     def tip_state(self) -> tuple[np.ndarray, np.ndarray]:
-        """Tip position (3,) in m and linear velocity (3,) in m/s (timed as the observation's
-        share of a step)."""
+        """Tip position (3,) in m and linear velocity (3,) in m/s, as the last step left them
+        (timed as the observation's share of a step)."""
         t = time.perf_counter()
-        state = p.getLinkState(self.panda, self.params.tip_link, computeLinkVelocity=1,
-                               computeForwardKinematics=True, physicsClientId=self.client)
+        state = self._tip_link_state(velocity=True)
         self.timings.observation += time.perf_counter() - t
         return np.array(state[4]), np.array(state[6])
 
@@ -425,12 +434,19 @@ class RodScene:
         return (self.initial_tip + np.asarray(self.params.workspace_low),
                 self.initial_tip + np.asarray(self.params.workspace_high))
 
+    def clip_to_workspace(self, target: np.ndarray) -> np.ndarray:
+        """``target`` (3,) clipped to the tip workspace box: the one place that decides where
+        a tip target may go. Its top is the initial tip height, so a tip that creeps up while
+        it moves sideways is pulled back there (the authors' sweep and environment both clip;
+        a sweep that does not drifts upwards level after level)."""
+        low, high = self.workspace
+        return np.clip(np.asarray(target, dtype=np.float64), low, high)
+
     def tip_target(self, action: np.ndarray) -> np.ndarray:
         """Integrate a velocity action over ``action_duration``; clip to the tip workspace."""
         prm = self.params
-        target = self.tip_position() + np.asarray(action) * prm.v_max * prm.action_duration
-        low, high = self.workspace
-        return np.clip(target, low, high)
+        return self.clip_to_workspace(
+            self.tip_position() + np.asarray(action) * prm.v_max * prm.action_duration)
 
     def move_tip_to(self, target: np.ndarray) -> None:
         """Command the tip to ``target`` (3,) by IK, keep its orientation, advance one action."""
@@ -448,13 +464,13 @@ class RodScene:
         t = time.perf_counter()
         for _ in range(self.params.steps_per_action):
             p.stepSimulation(physicsClientId=self.client)
+        self._stepped = True
         self.timings.physics += time.perf_counter() - t
         self.timings.actions += 1
 
     def tip_orientation_now(self) -> tuple[float, float, float, float]:
-        """The tip's current orientation quaternion (x, y, z, w), as the arm holds it now."""
-        return p.getLinkState(self.panda, self.params.tip_link, computeForwardKinematics=True,
-                              physicsClientId=self.client)[5]
+        """The tip's orientation quaternion (x, y, z, w), as the last step left it."""
+        return self._tip_link_state()[5]
 
     def command_tip_plain_ik(self, target: np.ndarray) -> None:
         """Set the arm's joint targets for tip ``target`` (3,) the way the authors' sweep did:
@@ -470,6 +486,7 @@ class RodScene:
         t = time.perf_counter()
         for _ in range(n):
             p.stepSimulation(physicsClientId=self.client)
+        self._stepped = self._stepped or n > 0
         self.timings.physics += time.perf_counter() - t
 
     def _set_arm_targets(self, joints) -> None:

@@ -20,7 +20,8 @@ from dlo_course.docs_numbers import BLOCKS, DOCS, REPO_ROOT, blocks_in, render
 
 README_BLOCKS = {"table1", "agents", "course-size"}
 LESSONS_BLOCKS = {"exercises", "course-size"}
-DESIGN_BLOCKS = {"ablation", "seeds", "database", "speed", "reproduction-time"}
+DESIGN_BLOCKS = {"ablation", "seeds", "database", "fidelity", "tip-reads", "before-after", "speed",
+                 "reproduction-time"}
 
 
 def _text(name: str) -> str:
@@ -56,7 +57,8 @@ def test_table_one_appears_once_in_the_readme():
 
 def _copy_sources(tmp_path: Path) -> Path:
     for rel in ["docs/reproduction", "data/paper", "benchmarks/results", "README.md",
-                "docs/design.md", "lessons/README.md", "solutions"]:
+                "docs/design.md", "lessons/README.md", "solutions", "data/databases/small.npz",
+                "data/databases/large.npz"]:
         src, dst = REPO_ROOT / rel, tmp_path / rel
         dst.parent.mkdir(parents=True, exist_ok=True)
         if src.is_dir():

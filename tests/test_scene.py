@@ -26,7 +26,10 @@ def test_sim_params_from_a_dict():
         sim_params({"bogus": 1})
     with pytest.raises(TypeError):
         sim_params(3)
-    assert sim_params(AUTHORS_SETTINGS).edge_damping == 0.0
+    authors = sim_params(AUTHORS_SETTINGS)
+    # No dampers and no ground contact, as the default; the rest moves the sweep < 0.1 mm.
+    assert authors.edge_damping == SimParams().edge_damping == 0.0
+    assert authors.plane_contact is SimParams().plane_contact is False
 
 
 @pytest.mark.parametrize("field, value", [("anchors", "glue"), ("finger_opening", 0.2),
@@ -98,3 +101,42 @@ def test_dampers_change_the_rod():
     plain = trajectory(SimParams(edge_damping=0.0), moves)
     gap = np.linalg.norm(damped - plain, axis=-1).max()
     assert gap > 1e-3, f"{gap * 1e3:.3f} mm"
+
+
+def test_the_tip_is_read_as_the_last_step_left_it():
+    """As the authors read it: forward kinematics only before the first step after a build."""
+    from dlo_course.simulation import p
+
+    scene = RodScene()
+    try:
+        c, link = scene.client, scene.params.tip_link
+        fresh = np.array(p.getLinkState(scene.panda, link, computeForwardKinematics=1,
+                                        physicsClientId=c)[4])
+        np.testing.assert_allclose(scene.tip_position(), fresh)
+        np.testing.assert_allclose(scene.initial_tip, fresh)
+        for _ in range(3):
+            scene.move_tip_to(scene.tip_target(np.array([1.0, 0.5, 0.0])))
+        stale = np.array(p.getLinkState(scene.panda, link, physicsClientId=c)[4])
+        # Read first, before anything recomputes the links: a forward-kinematics read would
+        # give the arm's present pose, about 0.5 mm away after these three moves.
+        np.testing.assert_array_equal(scene.tip_position(), stale)
+        np.testing.assert_array_equal(scene.tip_state()[0], stale)
+        moved = np.array(p.getLinkState(scene.panda, link, computeForwardKinematics=1,
+                                        physicsClientId=c)[4])
+        assert np.linalg.norm(moved - stale) > 1e-5
+    finally:
+        scene.close()
+
+
+def test_every_tip_target_is_clipped_to_the_workspace():
+    scene = RodScene()
+    try:
+        low, high = scene.workspace
+        assert high[2] == pytest.approx(scene.initial_tip[2])  # the top: the initial height
+        above = scene.initial_tip + np.array([0.0, 0.7, 0.05])
+        np.testing.assert_allclose(scene.clip_to_workspace(above),
+                                   [scene.initial_tip[0], high[1], high[2]])
+        np.testing.assert_allclose(scene.tip_target(np.ones(3)),
+                                   np.minimum(scene.initial_tip + 0.06, high))
+    finally:
+        scene.close()

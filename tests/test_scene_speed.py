@@ -74,7 +74,7 @@ def test_benchmark_model_is_rodscene():
 
 
 def test_edge_spring_arguments():
-    assert COURSE.edge_damping == SimParams().edge_damping == 1.0  # closest to the authors' file
+    assert COURSE.edge_damping == SimParams().edge_damping == 0.0  # the authors' rod has none
     damped = edge_spring_args(1.0)
     assert damped["useMassSpring"] == 1 and damped["springDampingStiffness"] == 1.0
     assert damped["springElasticStiffness"] > 0  # PyBullet adds no force without stiffness
