@@ -89,11 +89,12 @@ def main() -> None:
     parser.add_argument("--train-episodes", type=int, default=3)
     parser.add_argument("--train-steps", type=int, default=60)
     parser.add_argument("--no-train", action="store_true", help="skip the training part")
+    parser.add_argument("--only-train", action="store_true", help="only the training part")
     parser.add_argument("--out", type=Path, default=None, help="append the result here")
     args = parser.parse_args()
     trees = {"before": args.before.resolve(), "after": args.after.resolve()}
-    parts = {"env (actions/s)": (ENV_SNIPPET, args.env_steps),
-             "sweep (records/s)": (SWEEP_SNIPPET, args.sweep_records)}
+    parts = {} if args.only_train else {"env (actions/s)": (ENV_SNIPPET, args.env_steps),
+                                        "sweep (records/s)": (SWEEP_SNIPPET, args.sweep_records)}
     if not args.no_train:
         parts["train, 2 ranks (transitions/s)"] = (TRAIN_SNIPPET, args.train_episodes,
                                                   args.train_steps)

@@ -27,6 +27,8 @@ and holds exactly what :data:`BLOCKS` renders for its name from the repository's
 * ``tip-reads`` and ``before-after``: what reading the tip with forward kinematics changes,
   and the scene before and after issue 35 (``benchmarks/results/tip_reads.txt``,
   ``scene_before_after.txt``);
+* ``scenes``: the shipped agents' Table I in the scene before issue 35 and now
+  (``docs/reproduction/before_issue35/`` and ``docs/reproduction/``);
 * ``speed``: ``benchmarks/results/bench_env.txt`` and ``dlo_train_throughput.txt``;
 * ``reproduction-time``: the protocol summary of ``benchmarks/results/reproduction_time.txt``;
 * ``exercises`` and ``course-size``: the graded items of every lesson and their points, and the
@@ -256,6 +258,26 @@ def fidelity_markdown(root: Path = REPO_ROOT) -> str:
     return "\n".join(lines) + "\n"
 
 
+def scenes_markdown(root: Path = REPO_ROOT) -> str:
+    """The shipped agents' Table I before and after issue 35's scene, beside the paper:
+    ``docs/reproduction/before_issue35/`` against ``docs/reproduction/`` (both protocols)."""
+    before_dir, now_dir = root / "docs/reproduction/before_issue35", root / "docs/reproduction"
+    lines = ["| goals | reinit | nodes | database | at 0.05 m: before / now / paper | "
+             "at 0.03 m: before / now / paper |", "|---|---|---|---|---|---|"]
+    for name, goals in (("table1.csv", "test"), ("table1_whole_database.csv", "whole")):
+        before = {_key(r): r for r in _read_csv(before_dir / name)}
+        now = {_key(r): r for r in _read_csv(now_dir / name)}
+        for reinit, nodes, db in dict.fromkeys(k[:3] for k in now):
+            cells = []
+            for t in (0.05, 0.03):
+                r, b = now.get((reinit, nodes, db, t)), before.get((reinit, nodes, db, t))
+                cells.append(" / ".join([_pct(b["done_percent"]) if b else "-",
+                                         f"**{_pct(r['done_percent'])}**" if r else "-",
+                                         r["paper_done_percent"] if r else "-"]))
+            lines.append(f"| {goals} | {reinit} | {nodes} | {db} | {cells[0]} | {cells[1]} |")
+    return "\n".join(lines) + "\n"
+
+
 def _result_table(name: str) -> Callable[[Path], str]:
     """A block that is the Markdown table of ``benchmarks/results/<name>``."""
     def render(root: Path = REPO_ROOT) -> str:
@@ -349,6 +371,7 @@ BLOCKS: dict[str, Callable[[Path], str]] = {
     "database": database_markdown,
     "fidelity": fidelity_markdown,
     "tip-reads": _result_table("tip_reads.txt"),
+    "scenes": scenes_markdown,
     "before-after": _result_table("scene_before_after.txt"),
     "speed": speed_markdown,
     "reproduction-time": reproduction_time_markdown,

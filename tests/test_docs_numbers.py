@@ -20,7 +20,8 @@ from dlo_course.docs_numbers import BLOCKS, DOCS, REPO_ROOT, blocks_in, render
 
 README_BLOCKS = {"table1", "agents", "course-size"}
 LESSONS_BLOCKS = {"exercises", "course-size"}
-DESIGN_BLOCKS = {"ablation", "seeds", "database", "fidelity", "tip-reads", "before-after", "speed",
+DESIGN_BLOCKS = {"ablation", "seeds", "database", "fidelity", "tip-reads", "before-after", "scenes",
+                 "speed",
                  "reproduction-time"}
 
 
