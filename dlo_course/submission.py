@@ -36,6 +36,7 @@ same numbers on any run of the same code, up to the last bits of floating point 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -82,30 +83,168 @@ def actor_file(agent: str | Path) -> Path:
     return path / ACTOR_NAME if path.is_dir() else path
 
 
+# ------------------------------------------------------------------ what the points reward
+
+LESSON_N_NODES = 2
+"""The node count of lesson 9's agent: a hand-in of another node count is not that agent."""
+
+PROBE_COUNT, PROBE_SEED = 256, 0
+"""How many observations :func:`probe_observations` draws, and from which seed."""
+
+LIKENESS_TOLERANCE = 0.1
+"""Mean absolute difference of actions (in [-1, 1] per component) on
+:func:`probe_observations` below which a handed-in actor *behaves like* a shipped one
+(:func:`shipped_likeness`). Changing one weight of a shipped actor by 1e-6 or scaling them
+all by 1.0001 moves its actions by at most 1e-4; Gaussian noise of 0.1, 0.2, 0.3, 0.5 x each
+weight tensor's spread by 0.05, 0.10, 0.15, 0.27; agents trained apart differ by 0.23-0.31
+(the shipped 6-node seeds). So 0.1, under half the closest pair trained apart: a shipped actor
+fine-tuned, or disturbed on purpose, until its actions move by 0.1 on average counts as the
+student's, the grey zone where behaviour alone cannot tell
+(``benchmarks/own_agent_floor.py``, ``benchmarks/results/own_agent_floor/``)."""
+
+FLOOR_SHARE = 0.75
+"""The learning floor: on the graded protocol the actor's mean final distance must be at most
+this share of the mean distance that doing nothing leaves (the distance of each goal from the
+shape the protocol starts in), i.e. the actor must close at least a quarter of the gap on
+average. Every graded goal is 13-18 cm from that shape, so doing nothing reaches none of them;
+an untrained actor's outputs are close to zero (the last layer starts small) and it ends where
+doing nothing does (``benchmarks/own_agent_floor.py``)."""
+
+
+def probe_observations(n_nodes: int, count: int = PROBE_COUNT, seed: int = PROBE_SEED
+                       ) -> np.ndarray:
+    """(count, 6 + 6 n_nodes) float32 observations of the rod as it can be: the tip and the
+    nodes of one record of the small database (at rest: zero tip velocity) and, as the goal,
+    the nodes of another, both drawn from ``seed``. Where actors are compared."""
+    return _probe_observations(int(n_nodes), int(count), int(seed)).copy()
+
+
+@functools.lru_cache(maxsize=4)
+def _probe_observations(n_nodes: int, count: int, seed: int) -> np.ndarray:
+    from dlo_course.database import load_database
+
+    database = load_database("small")
+    shapes = database.goals(n_nodes).reshape(len(database), -1)
+    rng = np.random.default_rng(seed)
+    now, goal = rng.integers(len(database), size=(2, count))
+    return np.concatenate([database.tip[now], np.zeros((count, 3)), shapes[now], shapes[goal]],
+                          axis=1).astype(np.float32)
+
+
+def probe_actions(actor, n_nodes: int) -> np.ndarray:
+    """(PROBE_COUNT, 3) the deterministic actor's actions on :func:`probe_observations`."""
+    from dlo_course.ddpg import policy_action
+
+    return policy_action(actor, probe_observations(n_nodes))
+
+
+def shipped_actor_files() -> list[Path]:
+    """Every actor the course ships: each ``actor.pt`` below ``data/checkpoints/`` (the
+    agents of every node count and the seeds' agents)."""
+    from dlo_course.paths import AGENTS_DIR
+
+    return sorted(AGENTS_DIR.rglob(ACTOR_NAME))
+
+
+def shipped_likeness(actions: np.ndarray, n_nodes: int) -> list[tuple[str, float]]:
+    """How far a handed-in actor's :func:`probe_actions` are from each shipped actor's of the
+    same node count (others take other observations: :data:`LESSON_N_NODES` refuses them):
+    ``[(path relative to the data folder, mean absolute action difference), ...]``, nearest
+    first."""
+    from dlo_course.paths import DATA_DIR
+
+    actions = np.asarray(actions, dtype=np.float64)
+    found = []
+    for path in shipped_actor_files():
+        info = path.stat()
+        nodes, theirs = _shipped_behaviour(str(path), info.st_size, info.st_mtime_ns)
+        if nodes != n_nodes:
+            continue
+        distance = float(np.mean(np.abs(actions - theirs))) if actions.shape == theirs.shape \
+            else math.inf
+        found.append((path.relative_to(DATA_DIR).as_posix(), distance))
+    return sorted(found, key=lambda item: item[1])
+
+
+@functools.lru_cache(maxsize=32)
+def _shipped_behaviour(path: str, size: int, mtime_ns: int) -> tuple[int, np.ndarray]:
+    """(n_nodes, probe actions as float64) of a shipped actor file, once per version of it
+    (``size`` and ``mtime_ns`` name the version)."""
+    behaviour = actor_behaviour(path)
+    return behaviour["n_nodes"], behaviour["probe_actions"].astype(np.float64)
+
+
+def actor_behaviour(agent: str | Path) -> dict[str, Any]:
+    """``{"n_nodes": int, "probe_actions": (PROBE_COUNT, 3) array}``: a trained agent's node
+    count and its actions on :func:`probe_observations` (no simulation: well under a second),
+    for :func:`likeness_problems`."""
+    from dlo_course.evaluation import load_actor
+
+    actor, n_nodes = load_actor(actor_file(agent))
+    return {"n_nodes": int(n_nodes), "probe_actions": probe_actions(actor, n_nodes)}
+
+
+def likeness_problems(behaviour: dict[str, Any]) -> list[str]:
+    """Why a handed-in actor (:func:`actor_behaviour`, run by the grader) is not lesson 9's
+    agent of the student's own, whatever its bytes (an empty list: it may be): another node
+    count (:data:`LESSON_N_NODES`), or actions within :data:`LIKENESS_TOLERANCE` of a shipped
+    actor's."""
+    n_nodes = int(behaviour["n_nodes"])
+    if n_nodes != LESSON_N_NODES:
+        return [f"the actor takes {n_nodes}-node observations: lesson 9 trains a "
+                f"{LESSON_N_NODES}-node agent, hand in that one"]
+    near = [(path, d) for path, d in shipped_likeness(behaviour["probe_actions"], n_nodes)
+            if d < LIKENESS_TOLERANCE]
+    if not near:
+        return []
+    path, distance = near[0]
+    return [f"the actor behaves like the shipped {path} (its actions differ by {distance:.2g} "
+            f"on average on the grader's test observations, less than {LIKENESS_TOLERANCE:g}): "
+            "it is not an agent you trained; hand in lesson 9's"]
+
+
+def floor_problems(measured: dict[str, Any]) -> list[str]:
+    """Why the grader's own evaluation of a handed-in actor (:func:`evaluate_graded`) is below
+    the learning floor (:data:`FLOOR_SHARE`; an empty list: above it)."""
+    final = float(np.mean([g["final_distance"] for g in measured["goals"]]))
+    nothing = float(np.mean(measured["do_nothing_distances"]))
+    if final <= FLOOR_SHARE * nothing:
+        return []
+    return [f"the actor learned too little: it ends {final:.3f} m from the graded goals on "
+            f"average, where doing nothing leaves {nothing:.3f} m; an agent must end within "
+            f"{FLOOR_SHARE:g} x that ({FLOOR_SHARE * nothing:.3f} m). Train it longer (lesson 9, "
+            "section 7) and hand it in again"]
+
+
 def evaluate_graded(agent: str | Path, protocol: dict[str, Any] | None = None
                     ) -> dict[str, Any]:
     """Run the graded protocol on a trained agent (:func:`dlo_course.evaluation.load_actor`).
 
     Returns:
         ``{"n_nodes": int, "goals": [{"goal_index", "done", "final_distance", "steps"}, ...],
-        "done_percent": float}``, the goals in protocol order.
+        "done_percent": float, "do_nothing_distances": [float, ...]}``, the goals in
+        protocol order. ``do_nothing_distances`` (m): each goal's mean node distance from
+        the shape the protocol starts in, where a policy that does nothing leaves the rod
+        (:func:`floor_problems`).
     """
     from dlo_course.database import resolve_goals
-    from dlo_course.env import make_env
+    from dlo_course.env import make_env, mean_node_distance
     from dlo_course.evaluation import EpisodeTrace, _play, load_actor
 
     protocol = dict(GRADED_PROTOCOL if protocol is None else protocol)
     actor, n_nodes = load_actor(actor_file(agent))
     indices = [int(i) for i in protocol["goal_indices"]]
     threshold = float(protocol["threshold"])
-    env = make_env(max_episode_steps=None, n_nodes=n_nodes,
-                   goals=resolve_goals(protocol["goals"], n_nodes)[indices],
+    goal_shapes = resolve_goals(protocol["goals"], n_nodes)[indices]
+    env = make_env(max_episode_steps=None, n_nodes=n_nodes, goals=goal_shapes,
                    threshold=threshold, time_mode="code")
     goals = []
     try:
         # One world, built and settled once (the costly part); every later episode starts
         # where the previous one stopped, from its new goal at once.
         obs, info = env.reset(options={"reinitialize": True, "goal_index": 0})
+        start = env.unwrapped.scene.node_positions()[env.unwrapped.node_ids]
+        do_nothing = [mean_node_distance(start, goal) for goal in goal_shapes]
         for k, index in enumerate(indices):
             if k:
                 obs, info = env.unwrapped.set_goal(k)
@@ -119,7 +258,8 @@ def evaluate_graded(agent: str | Path, protocol: dict[str, Any] | None = None
         env.close()
     done = sum(g["done"] for g in goals)
     return {"n_nodes": int(n_nodes), "goals": goals,
-            "done_percent": 100.0 * done / len(goals)}
+            "done_percent": 100.0 * done / len(goals),
+            "do_nothing_distances": [float(d) for d in do_nothing]}
 
 
 def run_summary(run_dir: str | Path) -> dict[str, Any] | None:
@@ -169,32 +309,156 @@ def write_submission(agent: str | Path, folder: str | Path) -> dict[str, Any]:
 
 
 class SubmissionError(ValueError):
-    """A handed-in folder that cannot be graded (missing, unreadable)."""
+    """A handed-in folder that cannot be graded (missing, unreadable, too large, a link)."""
+
+
+MAX_REPORT_BYTES = 256 * 2**10
+"""The largest report a hand-in may hold (lesson 13 writes about 3 kB)."""
+MAX_REPORT_NESTING = 16
+"""The deepest nesting of lists and objects a report may have (lesson 13 writes 4 levels)."""
+
+
+def _read_limited(path: Path, limit: int, how: str) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes, its last component never
+    followed if it is a link (``O_NOFOLLOW``) and never opened if it is not a regular file
+    (a FIFO would block). Raises SubmissionError with what is wrong and ``how`` to fix it."""
+    import os
+    import stat
+
+    try:
+        info = path.lstat()
+    except OSError:
+        raise SubmissionError(f"no {path.name} in {path.parent}: {how}") from None
+    if stat.S_ISLNK(info.st_mode):
+        # Nothing of the target is read or told: a link could point anywhere on the grader's
+        # machine.
+        raise SubmissionError(f"{path.name} is a symbolic link; hand in the file itself: {how}")
+    if not stat.S_ISREG(info.st_mode):
+        raise SubmissionError(f"{path.name} is not a regular file: {how}")
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0)
+                     | getattr(os, "O_NONBLOCK", 0))
+    except OSError as err:
+        raise SubmissionError(f"{path.name} cannot be opened ({err.strerror}): {how}") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):  # swapped since lstat
+            raise SubmissionError(f"{path.name} is not a regular file: {how}")
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(limit + 1)
+    finally:
+        os.close(fd)
+    if len(data) > limit:
+        raise SubmissionError(f"{path.name} is larger than {limit / 2**20:.2g} MB, not what "
+                              f"lesson 13 writes: {how}")
+    return data
+
+
+def _nesting(text: str) -> int:
+    """The deepest nesting of ``[`` and ``{`` in JSON text, strings skipped; counted without
+    recursion, so that deep text cannot exhaust the parser's stack."""
+    depth = deepest = 0
+    in_string = escaped = False
+    for char in text:
+        if in_string:
+            if escaped:
+                escaped = False
+            elif char == "\\":
+                escaped = True
+            elif char == '"':
+                in_string = False
+        elif char == '"':
+            in_string = True
+        elif char in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif char in "]}":
+            depth -= 1
+    return deepest
+
+
+def _no_constant(name: str):
+    raise ValueError(f"{name} is not a number")
+
+
+def parse_report(data: bytes) -> dict[str, Any]:
+    """A report's JSON object from its bytes: UTF-8, at most :data:`MAX_REPORT_NESTING`
+    levels deep, no NaN or infinity. Raises ValueError with what is wrong."""
+    text = data.decode("utf-8")
+    if _nesting(text) > MAX_REPORT_NESTING:
+        raise ValueError(f"nested more than {MAX_REPORT_NESTING} levels deep")
+    report = json.loads(text, parse_constant=_no_constant)
+    if not isinstance(report, dict):
+        raise ValueError(f"it holds a {type(report).__name__}, not a report object")
+    return report
 
 
 def read_submission(folder: str | Path) -> tuple[dict[str, Any], bytes]:
-    """The report and the actor file's bytes of a handed-in folder.
+    """The report and the actor file's bytes of a handed-in folder, read with limits: no
+    symbolic link followed (the folder or its files), at most :data:`MAX_REPORT_BYTES` and
+    :data:`MAX_ACTOR_BYTES`, the report's nesting bounded (:func:`parse_report`).
 
     Raises:
-        SubmissionError: with what is missing and how to make it.
+        SubmissionError: with what is wrong and how to hand in again.
     """
     folder = Path(folder)
-    report_path, actor = folder / REPORT_NAME, folder / ACTOR_NAME
     how = ("run the last cell of lesson 13 (section 11), which writes both, and hand in the "
            f"folder {SUBMISSION_DIR}/ beside the notebook")
-    missing = [p.name for p in (report_path, actor) if not p.is_file()]
+    if folder.is_symlink():
+        raise SubmissionError(f"{folder.name} is a symbolic link; hand in the folder itself: "
+                              f"{how}")
+    missing = [name for name in (REPORT_NAME, ACTOR_NAME)
+               if not (folder / name).is_symlink() and not (folder / name).exists()]
     if missing:
         raise SubmissionError(f"no {' and no '.join(missing)} in {folder}: {how}")
-    if actor.stat().st_size > MAX_ACTOR_BYTES:
-        raise SubmissionError(f"{actor} is {actor.stat().st_size / 2**20:.0f} MB, not an actor "
-                              f"file of lesson 9 (at most {MAX_ACTOR_BYTES // 2**20} MB): {how}")
+    actor = _read_limited(folder / ACTOR_NAME, MAX_ACTOR_BYTES, how)
+    data = _read_limited(folder / REPORT_NAME, MAX_REPORT_BYTES, how)
     try:
-        report = json.loads(report_path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as err:
-        raise SubmissionError(f"{report_path} is not readable JSON ({err}): {how}") from err
-    if not isinstance(report, dict):
-        raise SubmissionError(f"{report_path} holds no report object: {how}")
-    return report, actor.read_bytes()
+        report = parse_report(data)
+    except (ValueError, RecursionError) as err:  # UnicodeDecodeError is a ValueError
+        raise SubmissionError(f"{REPORT_NAME} is not a readable report ({str(err)[:200]}): "
+                              f"{how}") from None
+    return report, actor
+
+
+def _is_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _is_number(value: Any) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and math.isfinite(value))
+
+
+def report_type_problems(report: dict[str, Any]) -> list[str]:
+    """What in a report is missing or of the wrong type (an empty list: nothing)."""
+    problems = []
+    if report.get("format") != REPORT_FORMAT:
+        problems.append(f"format {str(report.get('format'))[:20]!r} is not {REPORT_FORMAT}")
+    if not _is_int(report.get("n_nodes")):
+        problems.append("n_nodes is not an integer")
+    if not isinstance(report.get("actor_sha256"), str):
+        problems.append("actor_sha256 is not a string")
+    if not _is_number(report.get("done_percent")):
+        problems.append("done_percent is not a number")
+    goals = report.get("goals")
+    if not isinstance(goals, list) or len(goals) != len(GRADED_PROTOCOL["goal_indices"]):
+        problems.append(f"goals is not a list of {len(GRADED_PROTOCOL['goal_indices'])} "
+                        "results")
+    else:
+        for k, (goal, index) in enumerate(zip(goals, GRADED_PROTOCOL["goal_indices"])):
+            if not (isinstance(goal, dict) and goal.get("goal_index") == index
+                    and _is_int(goal["goal_index"]) and isinstance(goal.get("done"), bool)
+                    and _is_number(goal.get("final_distance"))
+                    and goal["final_distance"] >= 0 and _is_int(goal.get("steps"))):
+                problems.append(f"goals[{k}] is not a result of goal {index} (goal_index, "
+                                "done: true or false, final_distance: a number of m, steps)")
+    run = report.get("run")
+    if run is not None and not (isinstance(run, dict) and all(
+            _is_int(run.get(key, 0)) and run.get(key, 0) >= 0
+            for key in ("transitions", "episodes"))):
+        problems.append("run is neither null nor a run record with whole numbers of "
+                        "transitions and episodes")
+    return problems
 
 
 def report_problems(report: dict[str, Any], actor_bytes: bytes, measured: dict[str, Any] | None,
@@ -206,38 +470,37 @@ def report_problems(report: dict[str, Any], actor_bytes: bytes, measured: dict[s
         actor_bytes: the handed-in actor file.
         measured: :func:`evaluate_graded` of that actor file, run by the grader (None: not
             run, e.g. because an earlier check already failed).
-        forbidden_sha256: actors that are not the student's own (the shipped agents).
+        forbidden_sha256: actor files that are not the student's own (the shipped actors:
+            refused before any simulation; :func:`likeness_problems` refuses those that
+            merely behave like them).
     """
     digest = hashlib.sha256(actor_bytes).hexdigest()
     if digest in forbidden_sha256:
-        return ["the handed-in actor is the shipped agent (data/checkpoints), not yours: "
+        return ["the handed-in actor is a shipped agent (data/checkpoints), not yours: "
                 "train your own in lesson 9 and hand it in"]
-    problems = []
-    if report.get("actor_sha256") != digest:
+    problems = report_type_problems(report)
+    if problems:
+        return ["the report is malformed: " + "; ".join(problems)]
+    if report["actor_sha256"] != digest:
         problems.append(f"the report is of another actor file (sha256 "
-                        f"{str(report.get('actor_sha256'))[:12]}..., the handed-in actor.pt "
+                        f"{report['actor_sha256'][:12]}..., the handed-in actor.pt "
                         f"is {digest[:12]}...): write the report again with the actor you "
                         "hand in")
     if report.get("protocol") != GRADED_PROTOCOL:
-        problems.append(f"the report's protocol {report.get('protocol')} is not the graded "
-                        f"one {GRADED_PROTOCOL}")
-    goals = report.get("goals")
-    if not isinstance(goals, list) or len(goals) != len(GRADED_PROTOCOL["goal_indices"]):
-        return problems + ["the report has no result per graded goal"]
-    try:
-        claimed_done = [bool(g["done"]) for g in goals]
-        claimed_distance = [float(g["final_distance"]) for g in goals]
-        claimed_percent = float(report["done_percent"])
-    except (KeyError, TypeError, ValueError) as err:
-        return problems + [f"the report's results are unreadable ({err!r})"]
+        problems.append(f"the report's protocol {str(report.get('protocol'))[:200]} is not the "
+                        f"graded one {GRADED_PROTOCOL}")
+    goals = report["goals"]
+    claimed_done = [g["done"] for g in goals]
+    claimed_distance = [float(g["final_distance"]) for g in goals]
+    claimed_percent = float(report["done_percent"])
     if not math.isclose(claimed_percent, 100.0 * sum(claimed_done) / len(goals),
                         abs_tol=1e-6):
         problems.append(f"done % {claimed_percent:g} does not follow from the goals' done "
                         f"flags ({sum(claimed_done)} of {len(goals)})")
     if measured is None:
         return problems
-    if measured["n_nodes"] != report.get("n_nodes"):
-        problems.append(f"n_nodes: reported {report.get('n_nodes')}, the actor has "
+    if measured["n_nodes"] != report["n_nodes"]:
+        problems.append(f"n_nodes: reported {report['n_nodes']}, the actor has "
                         f"{measured['n_nodes']}")
     for claim_done, claim_distance, mine in zip(claimed_done, claimed_distance,
                                                 measured["goals"]):
@@ -252,28 +515,53 @@ def report_problems(report: dict[str, Any], actor_bytes: bytes, measured: dict[s
     return problems
 
 
-def csv_fields(folder: str | Path | None, verified: bool | None) -> dict[str, Any]:
-    """A student's columns of the class CSV from their handed-in report: ``claimed_done_percent``,
-    ``done_verified`` (1 if the grader's evaluation matched the report, 0 if not, empty when
-    not graded), ``run_transitions`` and ``run_episodes``; empty strings where the report (or
-    its run record) is missing."""
+def measured_fields(measured: dict[str, Any], report_matches: bool) -> dict[str, Any]:
+    """What the grader measured of a handed-in actor (:func:`evaluate_graded`), as the grades
+    record it for the class CSV (:func:`csv_fields`): plain numbers only."""
+    return {"done_percent": float(measured["done_percent"]),
+            "mean_distance": float(np.mean([g["final_distance"] for g in measured["goals"]])),
+            "do_nothing_distance": float(np.mean(measured["do_nothing_distances"])),
+            "report_matches": bool(report_matches)}
+
+
+CSV_COLUMNS = ("measured_done_percent", "measured_distance", "do_nothing_distance",
+               "report_verified", "claimed_done_percent", "claimed_run_transitions",
+               "claimed_run_episodes")
+"""The class CSV's columns of each student's hand-in (:func:`csv_fields`): first what the
+grader measured itself, then what the student's report claims and nothing checks."""
+
+
+def csv_fields(folder: str | Path | None, measured: dict[str, Any] | None) -> dict[str, Any]:
+    """A student's columns of the class CSV (:data:`CSV_COLUMNS`).
+
+    Measured by the grader at grading time (``measured``: :func:`measured_fields`, None when
+    the actor was not evaluated): ``measured_done_percent`` and ``measured_distance`` (its
+    mean final distance, m) on the graded protocol, ``do_nothing_distance`` (m, the same
+    goals without moving), ``report_verified`` (1 if the report says what the grader
+    measured, 0 if not, empty when not evaluated). Claimed by the student's report, not
+    checked: ``claimed_done_percent``, ``claimed_run_transitions``, ``claimed_run_episodes``.
+    Empty strings where something is missing; never raises, whatever the folder holds."""
     fields: dict[str, Any] = dict.fromkeys(CSV_COLUMNS, "")
-    if verified is not None:
-        fields["done_verified"] = int(bool(verified))
+    if isinstance(measured, dict):
+        for column, key in (("measured_done_percent", "done_percent"),
+                            ("measured_distance", "mean_distance"),
+                            ("do_nothing_distance", "do_nothing_distance")):
+            if _is_number(measured.get(key)):
+                fields[column] = round(float(measured[key]), 4)
+        if isinstance(measured.get("report_matches"), bool):
+            fields["report_verified"] = int(measured["report_matches"])
     if folder is None:
         return fields
     try:
         report, _ = read_submission(folder)
-    except SubmissionError:
+    except (SubmissionError, OSError):
         return fields
-    if isinstance(report.get("done_percent"), (int, float)):
+    if _is_number(report.get("done_percent")):
         fields["claimed_done_percent"] = float(report["done_percent"])
     run = report.get("run")
     if isinstance(run, dict):
-        fields["run_transitions"] = run.get("transitions", "")
-        fields["run_episodes"] = run.get("episodes", "")
+        for column, key in (("claimed_run_transitions", "transitions"),
+                            ("claimed_run_episodes", "episodes")):
+            if _is_int(run.get(key)):
+                fields[column] = run[key]
     return fields
-
-
-CSV_COLUMNS = ("claimed_done_percent", "done_verified", "run_transitions", "run_episodes")
-"""The class CSV's columns from each student's report (:func:`csv_fields`)."""

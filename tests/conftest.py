@@ -51,3 +51,37 @@ def make_env():
     yield _make
     for env in envs:
         env.close()
+
+
+@pytest.fixture(scope="session")
+def trained_hand_in(tmp_path_factory):
+    """(folder, report): lesson 13's hand-in of an agent that learned, written by the library
+    (one evaluation of the graded protocol): the shipped 2-node actor, from a run directory
+    with its run's configuration and learning curve. The grader refuses it as a shipped
+    actor, unless the installation does not ship it (:func:`data_without_the_2_node_agent`)."""
+    import shutil
+
+    from dlo_course.paths import AGENTS_DIR
+    from dlo_course.submission import SUBMISSION_DIR, write_submission
+
+    root = tmp_path_factory.mktemp("trained_hand_in")
+    run = root / "run"
+    run.mkdir()
+    for name in ("actor.pt", "config.json", "progress.csv"):
+        shutil.copyfile(AGENTS_DIR / "nodes2" / name, run / name)
+    folder = root / SUBMISSION_DIR
+    return folder, write_submission(run, folder)
+
+
+@pytest.fixture(scope="session")
+def data_without_the_2_node_agent(tmp_path_factory):
+    """A copy of the course's data folder without the 2-node agent, for ``DLO_COURSE_DATA``:
+    an installation in which the shipped 2-node actor is an agent the student trained (the
+    grader's shipped actors are those of its data folder)."""
+    import shutil
+
+    from dlo_course.paths import DATA_DIR
+
+    root = tmp_path_factory.mktemp("installation") / "data"
+    shutil.copytree(DATA_DIR, root, ignore=shutil.ignore_patterns("nodes2"))
+    return root

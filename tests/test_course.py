@@ -44,41 +44,26 @@ def run_grader(notebooks: Path, tmp_path: Path, timeout_per_exercise: float = 60
     return report
 
 
-def fresh_run(folder: Path) -> Path:
-    """A run directory holding a freshly initialised 2-node actor (not the shipped one) beside
-    the configuration and learning curve of the shipped 2-node agent's run: what lesson 9
-    leaves, without the training."""
-    import torch
-
-    from dlo_course.ddpg import Actor, save_network
-    from dlo_course.task import observation_size
-
-    folder.mkdir(parents=True)
-    torch.manual_seed(13)
-    save_network(Actor(observation_size(2), 3), folder / "actor.pt")
-    for name in ("config.json", "progress.csv"):
-        shutil.copyfile(AGENTS_DIR / "nodes2" / name, folder / name)
-    return folder
-
-
-@pytest.fixture(scope="module")
-def handed_in(tmp_path_factory) -> Path:
-    """Lesson 13's hand-in folder of a fresh actor, written once by the library (one
-    evaluation of the graded protocol); copy it beside a notebook to grade it."""
-    from dlo_course.submission import SUBMISSION_DIR, write_submission
-
-    root = tmp_path_factory.mktemp("handed_in")
-    write_submission(fresh_run(root / "run"), root / SUBMISSION_DIR)
-    return root / SUBMISSION_DIR
+@pytest.fixture
+def handed_in(trained_hand_in, data_without_the_2_node_agent, monkeypatch) -> Path:
+    """Lesson 13's hand-in folder of an agent that learned (tests/conftest.py), graded in an
+    installation that does not ship it, so that it earns its points; copy it beside a
+    notebook to grade it."""
+    monkeypatch.setenv("DLO_COURSE_DATA", str(data_without_the_2_node_agent))
+    return trained_hand_in[0]
 
 
 def hand_in(handed_in: Path, folder: Path) -> None:
     shutil.copytree(handed_in, folder / handed_in.name)
 
 
+def report_of(handed_in: Path) -> dict:
+    return json.loads((handed_in / "report.json").read_text())
+
+
 def handed_in_run(handed_in: Path) -> tuple[int, int]:
     """(transitions, episodes) of the run that the hand-in's report records."""
-    run = json.loads((handed_in / "report.json").read_text())["run"]
+    run = report_of(handed_in)["run"]
     return run["transitions"], run["episodes"]
 
 
@@ -283,8 +268,12 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
     assert result.exit_code == 0, result.output
     assert time.perf_counter() - started < 300
     board = (tmp_path / "agents.md").read_text().splitlines()  # alice's hand-in, verified
-    assert board[2:] == ["| 1 | alice | 0 | yes | " + " | ".join(
-        str(v) for v in handed_in_run(handed_in)) + " |", "| 2 | bob |  | no |  |  |"]
+    table = [[cell.strip() for cell in line.strip().strip("|").split("|")]
+             for line in board if line.startswith(("| 1 ", "| 2 "))]
+    assert [cells[1:3] for cells in table] == [["alice", "yes"], ["bob", "no"]]
+    assert table[0][6:] == ["yes", f"{report_of(handed_in)['done_percent']:g}",
+                            *(str(v) for v in handed_in_run(handed_in))]
+    assert table[1][3:] == [""] * 7
     with out.open(newline="") as f:
         rows = {row["student"]: row for row in csv.DictReader(f)}
     points = catalog()
@@ -401,15 +390,18 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, 
     assert bob["prediction_cells_text"] == "Six." and float(bob["prediction_cells"]) == 0
     assert bob["analysis_comparison_text"] == "" and float(bob["analysis_comparison"]) == 0
     assert float(bob["count_not_worse"]) == 0
-    # the hand-in: alice's verified report (a fresh actor: no goal reached), bob's absent
+    # the hand-in: alice's agent, measured by the grader, her report verified; bob's absent
+    report = report_of(handed_in)
     assert float(alice["own_agent_report"]) == points["own_agent_report"]
-    assert (alice["claimed_done_percent"], alice["done_verified"]) == ("0.0", "1")
+    assert float(alice["measured_done_percent"]) == float(alice["claimed_done_percent"]) \
+        == report["done_percent"]
+    assert alice["report_verified"] == "1" and float(alice["do_nothing_distance"]) > 0
     progress = (AGENTS_DIR / "nodes2" / "progress.csv").read_text().splitlines()
     last = dict(zip(progress[0].split(","), progress[-1].split(",")))
-    assert (alice["run_transitions"], alice["run_episodes"]) == (last["transitions"],
-                                                                 last["episode"])
-    assert [bob[c] for c in CSV_COLUMNS] == ["", "0", "", ""]
-    assert [carol[c] for c in CSV_COLUMNS] == ["", "0", "", ""]
+    assert (alice["claimed_run_transitions"], alice["claimed_run_episodes"]) == (
+        last["transitions"], last["episode"])
+    assert [bob[c] for c in CSV_COLUMNS] == [""] * len(CSV_COLUMNS)
+    assert [carol[c] for c in CSV_COLUMNS] == [""] * len(CSV_COLUMNS)
     assert float(carol["total"]) == 0 and all(carol[f"{t}_text"] == "" for t in texts)
 
     feedback = tmp_path / "grades_feedback"

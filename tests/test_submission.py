@@ -1,21 +1,29 @@
-"""Lesson 13's hand-in (dlo_course.submission): the report of the graded protocol, and the
-grader that evaluates the handed-in actor again and gives 0 to a report that does not say
-what the actor does, or to the shipped agent. Real actors, real PyBullet: one evaluation
-when the hand-in is written, and one per honest-looking report the grader checks."""
+"""Lesson 13's hand-in (dlo_course.submission): the report of the graded protocol, the
+grader that evaluates the handed-in actor again, and what earns the points: an agent the
+student trained (2 nodes, behaving like no shipped actor, above the learning floor) with a
+report that says what it does. Real actors, real PyBullet.
+
+The floor and the likeness tolerance are never compared here with a number measured once on
+a shipped agent (the scene and the agents change): the grader measures doing nothing on the
+same goals at grading time, and ``benchmarks/own_agent_floor.py`` says why the lines sit
+where they do.
+"""
 
 from __future__ import annotations
 
 import copy
 import csv
 import json
+import os
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
 from dlo_course import submission
-from dlo_course.ddpg import Actor, save_network
+from dlo_course.ddpg import Actor, load_network, save_network
 from dlo_course.grading.grade import grade, leaderboard_markdown
 from dlo_course.grading.notebooks import GRADING_TESTS_DIR
 from dlo_course.paths import AGENTS_DIR, REPO_ROOT
@@ -23,6 +31,7 @@ from dlo_course.rundir import read_progress
 from dlo_course.task import observation_size
 
 CAPSTONE = "13_capstone_table_one"
+SHIPPED2 = AGENTS_DIR / "nodes2" / submission.ACTOR_NAME
 
 
 def fresh_actor(path: Path, seed: int) -> Path:
@@ -31,16 +40,30 @@ def fresh_actor(path: Path, seed: int) -> Path:
     return path
 
 
+def changed_actor(source: Path, dest: Path, change) -> Path:
+    """``source``'s actor with ``change(actor)`` applied to it in place, saved to ``dest``."""
+    actor = load_network(source)
+    with torch.no_grad():
+        change(actor)
+    save_network(actor, dest)
+    return dest
+
+
+def run_of(actor: Path, folder: Path) -> Path:
+    """A run directory holding ``actor`` beside the shipped 2-node run's configuration and
+    learning curve: what lesson 9 leaves."""
+    folder.mkdir(parents=True)
+    shutil.copyfile(actor, folder / submission.ACTOR_NAME)
+    for name in ("config.json", "progress.csv"):
+        shutil.copyfile(AGENTS_DIR / "nodes2" / name, folder / name)
+    return folder
+
+
 @pytest.fixture(scope="module")
 def handed_in(tmp_path_factory):
-    """(folder, report): a hand-in of a freshly initialised actor, from a run directory that
-    holds it beside the shipped 2-node run's configuration and learning curve."""
+    """(folder, report): a hand-in of a freshly initialised actor, written by the library."""
     root = tmp_path_factory.mktemp("submission")
-    run = root / "run"
-    run.mkdir()
-    fresh_actor(run / "actor.pt", seed=13)
-    for name in ("config.json", "progress.csv"):
-        shutil.copyfile(AGENTS_DIR / "nodes2" / name, run / name)
+    run = run_of(fresh_actor(root / "fresh.pt", seed=13), root / "run")
     folder = root / submission.SUBMISSION_DIR
     return folder, submission.write_submission(run, folder)
 
@@ -50,6 +73,7 @@ def measured_of(report):
     return {key: copy.deepcopy(report[key]) for key in ("n_nodes", "goals", "done_percent")}
 
 
+@pytest.mark.slow
 def test_the_report_holds_the_protocol_results_and_the_run_record(handed_in):
     folder, report = handed_in
     assert json.loads((folder / submission.REPORT_NAME).read_text()) == report
@@ -73,6 +97,7 @@ def test_the_report_holds_the_protocol_results_and_the_run_record(handed_in):
     assert submission.report_problems(report, actor, measured_of(report)) == []
 
 
+@pytest.mark.slow
 def test_a_report_edited_by_hand_does_not_match(handed_in):
     folder, report = handed_in
     _, actor = submission.read_submission(folder)
@@ -91,79 +116,355 @@ def test_a_report_edited_by_hand_does_not_match(handed_in):
     assert submission.report_problems(edited, actor, measured) == []
 
 
-def test_another_actor_or_the_shipped_agent_does_not_match(handed_in, tmp_path):
-    folder, report = handed_in
-    other = fresh_actor(tmp_path / "other.pt", seed=14).read_bytes()
-    assert any("another actor file" in p
-               for p in submission.report_problems(report, other, None))
-    shipped = (AGENTS_DIR / "nodes2" / "actor.pt").read_bytes()
-    forged = dict(report, actor_sha256=submission.sha256_of(AGENTS_DIR / "nodes2" / "actor.pt"))
-    problems = submission.report_problems(forged, shipped, None,
-                                          (forged["actor_sha256"],))
-    assert len(problems) == 1 and "shipped agent" in problems[0]
+@pytest.mark.slow
+def test_an_untrained_actor_is_below_the_floor(handed_in):
+    """The floor is measured against doing nothing, on the same goals, by the same run: a
+    fresh actor's outputs are near zero, so it ends about where doing nothing leaves the rod,
+    and no goal of the graded protocol is within reach of the start."""
+    _, report = handed_in
+    measured = dict(measured_of(report), do_nothing_distances=None)
+    again = submission.evaluate_graded(Path(handed_in[0]) / submission.ACTOR_NAME)
+    assert again["goals"] == report["goals"]  # deterministic
+    assert all(d > submission.GRADED_PROTOCOL["threshold"]
+               for d in again["do_nothing_distances"])
+    measured["do_nothing_distances"] = again["do_nothing_distances"]
+    (problem,) = submission.floor_problems(measured)
+    assert "learned too little" in problem
 
 
-def test_read_submission_says_what_is_missing(tmp_path):
-    with pytest.raises(submission.SubmissionError, match="no report.json and no actor.pt"):
-        submission.read_submission(tmp_path)
-    (tmp_path / submission.ACTOR_NAME).write_bytes(b"x")
-    (tmp_path / submission.REPORT_NAME).write_text("{not json")
-    with pytest.raises(submission.SubmissionError, match="not readable JSON"):
-        submission.read_submission(tmp_path)
-    (tmp_path / submission.REPORT_NAME).write_text("{}")
-    (tmp_path / submission.ACTOR_NAME).write_bytes(b"\0" * (submission.MAX_ACTOR_BYTES + 1))
-    with pytest.raises(submission.SubmissionError, match="not an actor file"):
-        submission.read_submission(tmp_path)
+def test_the_floor_is_a_share_of_what_doing_nothing_leaves():
+    goals = [{"goal_index": i, "done": False, "final_distance": d, "steps": 6}
+             for i, d in zip(submission.GRADED_PROTOCOL["goal_indices"], (0.1, 0.1, 0.1, 0.1))]
+    measured = {"n_nodes": 2, "goals": goals, "done_percent": 0.0,
+                "do_nothing_distances": [0.15, 0.15, 0.15, 0.15]}
+    assert submission.floor_problems(measured) == []  # 0.1 <= 0.75 x 0.15
+    for goal in goals:
+        goal["final_distance"] = 0.13
+    assert "learned too little" in submission.floor_problems(measured)[0]
+    goals[0]["final_distance"] = float("nan")  # an unstable rod is not above the floor
+    assert submission.floor_problems(measured)
 
 
-def test_the_grader_evaluates_the_actor_again_and_fills_the_class_csv(handed_in, tmp_path):
-    """Through `dlo-course course grade`'s own function, lesson 13 only: an honest hand-in
-    earns the points; distances edited after the evaluation, or an actor swapped after the
-    report, earn none; the CSV says which claims were verified."""
-    folder, report = handed_in
-    catalog = tmp_path / "catalog"
-    catalog.mkdir()
+def test_actors_that_behave_like_a_shipped_one_are_refused_whatever_their_bytes(tmp_path):
+    """The student's attempts of issue 37, without simulation: a shipped actor changed by
+    1e-6, scaled by 1.0001, loaded and saved again, or with a byte appended behaves like the
+    shipped one; a seed's agent has 6 nodes; a fresh actor behaves like none of them."""
+    def one_weight(actor):
+        next(actor.net.parameters()).view(-1)[0] += 1e-6
+
+    def scaled(actor):
+        for value in actor.state_dict().values():
+            if value.is_floating_point():
+                value.mul_(1.0001)
+
+    attempts = [changed_actor(SHIPPED2, tmp_path / "w.pt", one_weight),
+                changed_actor(SHIPPED2, tmp_path / "s.pt", scaled),
+                changed_actor(SHIPPED2, tmp_path / "resaved.pt", lambda actor: None)]
+    appended = tmp_path / "appended.pt"
+    appended.write_bytes(SHIPPED2.read_bytes() + b"\0")
+    attempts.append(appended)
+    for path in attempts:
+        assert submission.sha256_of(path) != submission.sha256_of(SHIPPED2)
+        (problem,) = submission.likeness_problems(submission.actor_behaviour(path))
+        assert "behaves like the shipped checkpoints/nodes2/actor.pt" in problem, path.name
+    seeds = sorted((AGENTS_DIR / "seeds").rglob(submission.ACTOR_NAME))
+    assert seeds and set(seeds) <= set(submission.shipped_actor_files())
+    (problem,) = submission.likeness_problems(submission.actor_behaviour(seeds[0]))
+    assert "lesson 9 trains a 2-node agent" in problem
+    fresh = submission.actor_behaviour(fresh_actor(tmp_path / "fresh.pt", seed=13))
+    assert submission.likeness_problems(fresh) == []
+    assert all(d > 2 * submission.LIKENESS_TOLERANCE
+               for _, d in submission.shipped_likeness(fresh["probe_actions"], 2))
+
+
+def test_the_probe_observations_are_fixed_and_real():
+    first, again = submission.probe_observations(2), submission.probe_observations(2)
+    assert first.shape == (submission.PROBE_COUNT, observation_size(2))
+    assert np.array_equal(first, again) and np.isfinite(first).all()
+    assert not np.array_equal(first, submission.probe_observations(2, seed=1))
+    assert len(np.unique(first[:, -6:], axis=0)) > submission.PROBE_COUNT // 2  # many goals
+
+
+# ------------------------------------------------------------------ malformed hand-ins
+
+
+def valid_report(actor: bytes) -> dict:
+    """A well-formed, self-consistent report of ``actor`` (a made-up result)."""
+    import hashlib
+
+    goals = [{"goal_index": i, "done": False, "final_distance": 0.12, "steps": 6}
+             for i in submission.GRADED_PROTOCOL["goal_indices"]]
+    return {"format": submission.REPORT_FORMAT, "protocol": dict(submission.GRADED_PROTOCOL),
+            "n_nodes": 2, "actor_sha256": hashlib.sha256(actor).hexdigest(), "goals": goals,
+            "done_percent": 0.0, "run": {"transitions": 6000, "episodes": 50}}
+
+
+def deep(levels: int) -> str:
+    return '{"goals": ' + "[" * levels + "]" * levels + "}"
+
+
+SECRET = "instructor-secret.txt"  # beside the student's folders: never read, never told
+
+
+def malform(folder: Path, how: str, secret: Path) -> None:
+    """Make the hand-in ``folder`` (a valid one) malformed in one way (a link points to
+    ``secret``, a file of the grader's machine)."""
+    report, actor = folder / submission.REPORT_NAME, folder / submission.ACTOR_NAME
+    good = json.loads(report.read_text())
+    if how == "deep nesting":
+        report.write_text(deep(100_000))
+    elif how == "huge report":
+        report.write_text(json.dumps(dict(good, padding="x" * submission.MAX_REPORT_BYTES)))
+    elif how == "huge actor":
+        with actor.open("ab") as f:
+            f.truncate(submission.MAX_ACTOR_BYTES + 1)  # sparse: no disk used
+    elif how == "binary report":
+        report.write_bytes(bytes(range(256)) * 8)
+    elif how == "linked actor":
+        actor.unlink()
+        actor.symlink_to(secret)
+    elif how == "linked report":
+        report.unlink()
+        report.symlink_to(secret)
+    elif how == "linked folder":
+        shutil.rmtree(folder)
+        folder.symlink_to(secret.parent)
+    elif how == "fifo actor":
+        actor.unlink()
+        os.mkfifo(actor)
+    elif how == "NaN":
+        report.write_text(json.dumps(good).replace('"final_distance": 0.12', '"final_distance": NaN', 1))
+    elif how == "infinite done %":
+        report.write_text(json.dumps(good).replace('"done_percent": 0.0', '"done_percent": 1e999'))
+    elif how == "wrong types":
+        good["goals"][1]["done"] = "yes"
+        good["goals"][2]["final_distance"] = "0.1"
+        good["n_nodes"] = [2]
+        good["run"] = {"transitions": "a lot"}
+        report.write_text(json.dumps(good))
+    elif how == "missing fields":
+        report.write_text(json.dumps({"format": 1, "actor_sha256": good["actor_sha256"]}))
+    elif how == "not an object":
+        report.write_text(json.dumps([good]))
+    elif how == "actor is a folder":
+        actor.unlink()
+        actor.mkdir()
+    else:
+        raise ValueError(how)
+
+
+MALFORMED = ("deep nesting", "huge report", "huge actor", "binary report", "linked actor",
+             "linked report", "linked folder", "fifo actor", "NaN", "infinite done %",
+             "wrong types", "missing fields", "not an object", "actor is a folder")
+
+
+def make_hand_in(root: Path, actor: Path) -> Path:
+    folder = root / submission.SUBMISSION_DIR
+    folder.mkdir(parents=True)
+    shutil.copyfile(actor, folder / submission.ACTOR_NAME)
+    data = (folder / submission.ACTOR_NAME).read_bytes()
+    (folder / submission.REPORT_NAME).write_text(json.dumps(valid_report(data)))
+    return folder
+
+
+@pytest.mark.parametrize("how", MALFORMED)
+def test_a_malformed_hand_in_is_refused_with_a_reason_and_never_raises_more(tmp_path, how):
+    """Each way is a SubmissionError or a report problem (that student's 0, with a reason),
+    never another exception; the class CSV's fields of it are read without raising, and a
+    link's target is neither read nor told."""
+    (tmp_path / SECRET).write_text("the answer is 42\n")
+    folder = make_hand_in(tmp_path / "class" / "student", SHIPPED2)
+    malform(folder, how, tmp_path / SECRET)
+    try:
+        report, actor = submission.read_submission(folder)
+    except submission.SubmissionError as err:
+        reason = str(err)
+        assert submission.sha256_of(tmp_path / SECRET)[:8] not in reason and "42" not in reason
+    else:
+        problems = submission.report_problems(report, actor, None)
+        assert problems and problems[0].startswith("the report is malformed"), (how, problems)
+    fields = submission.csv_fields(folder, None)
+    assert set(fields) == set(submission.CSV_COLUMNS)
+    assert all(v == "" or isinstance(v, (int, float)) for v in fields.values())
+
+
+def test_a_well_formed_report_passes_the_type_checks(tmp_path):
+    folder = make_hand_in(tmp_path, SHIPPED2)
+    report, actor = submission.read_submission(folder)
+    assert submission.report_type_problems(report) == []
+    assert submission.report_problems(report, actor, None) == []
+    assert submission.csv_fields(folder, None)["claimed_run_transitions"] == 6000
+
+
+# ------------------------------------------------------------------ a class, graded
+
+
+def one_class(students: Path, catalog: Path, names, hand_ins: dict[str, Path]) -> None:
     notebook = REPO_ROOT / "solutions" / f"{CAPSTONE}.ipynb"
+    catalog.mkdir(exist_ok=True)
     shutil.copyfile(notebook, catalog / notebook.name)
-    students = tmp_path / "students"
-    for name in ("honest", "edited", "swapped"):
+    for name in names:
         (students / name).mkdir(parents=True)
         shutil.copyfile(notebook, students / name / notebook.name)
-        shutil.copytree(folder, students / name / folder.name)
+        if name in hand_ins:
+            shutil.copytree(hand_ins[name], students / name / submission.SUBMISSION_DIR,
+                            symlinks=True)
+
+
+@pytest.mark.slow
+def test_the_grader_measures_the_agent_and_fills_the_class_csv(
+        trained_hand_in, data_without_the_2_node_agent, tmp_path, monkeypatch):
+    """Through `dlo-course course grade`'s own function, lesson 13 only, in an installation
+    that does not ship the 2-node agent (so that it is an agent of the student's): an honest
+    hand-in of an agent that learned earns the points; distances edited after the evaluation
+    or an actor swapped after the report earn none; a student whose hand-in is malformed
+    (nested 100 000 deep, a link) gets 0 with a reason, and the class is graded to its end
+    with the others' points as they would be alone. The CSV and the leaderboard say what the
+    grader measured and what the reports claim."""
+    folder, report = trained_hand_in
+    (tmp_path / SECRET).write_text("the answer is 42\n")
+    monkeypatch.setenv("DLO_COURSE_DATA", str(data_without_the_2_node_agent))
+    students = tmp_path / "students"
+    names = ("deep", "edited", "honest", "linked", "swapped")
+    one_class(students, tmp_path / "catalog", names, dict.fromkeys(names, folder))
     edited = copy.deepcopy(report)
     for goal in edited["goals"]:
-        goal["final_distance"] -= 0.01  # closer, not close enough to change a done flag
+        goal["final_distance"] -= 0.002  # closer, not close enough to change a done flag
     (students / "edited" / folder.name / submission.REPORT_NAME).write_text(json.dumps(edited))
     fresh_actor(students / "swapped" / folder.name / submission.ACTOR_NAME, seed=15)
+    malform(students / "deep" / folder.name, "deep nesting", tmp_path / SECRET)
+    (students / "linked" / folder.name / submission.ACTOR_NAME).unlink()
+    (students / "linked" / folder.name / submission.ACTOR_NAME).symlink_to(tmp_path / SECRET)
 
     out = tmp_path / "grades.csv"
-    graded = grade(students, out, GRADING_TESTS_DIR / f"test_{CAPSTONE}.py", catalog=catalog,
-                   progress=False)
+    graded = grade(students, out, GRADING_TESTS_DIR / f"test_{CAPSTONE}.py",
+                   catalog=tmp_path / "catalog", progress=False)
     with out.open(newline="", encoding="utf-8") as f:
         rows = {row["student"]: row for row in csv.DictReader(f)}
+    assert list(rows) == list(names)
     assert {name: float(row["own_agent_report"]) for name, row in rows.items()} == {
-        "honest": 2, "edited": 0, "swapped": 0}
-    assert {name: row["done_verified"] for name, row in rows.items()} == {
-        "honest": "1", "edited": "0", "swapped": "0"}
-    assert all(float(row["claimed_done_percent"]) == report["done_percent"]
-               for row in rows.values())
-    assert all(int(row["run_transitions"]) == report["run"]["transitions"]
-               for row in rows.values())
+        "deep": 0, "edited": 0, "honest": 2, "linked": 0, "swapped": 0}
+    others = {name: float(row["total"]) - float(row["own_agent_report"])
+              for name, row in rows.items()}
+    assert len(set(others.values())) == 1 and others["honest"] > 0  # the rest: unchanged
+    assert {name: row["report_verified"] for name, row in rows.items()} == {
+        "deep": "", "edited": "0", "honest": "1", "linked": "", "swapped": ""}
+    honest = rows["honest"]
+    assert float(honest["measured_done_percent"]) == report["done_percent"]
+    assert float(honest["measured_distance"]) == pytest.approx(
+        np.mean([g["final_distance"] for g in report["goals"]]), abs=1e-4)
+    assert float(honest["measured_distance"]) <= \
+        submission.FLOOR_SHARE * float(honest["do_nothing_distance"])
+    assert int(honest["claimed_run_transitions"]) == report["run"]["transitions"]
+    assert rows["edited"]["measured_done_percent"] == honest["measured_done_percent"]
+    assert rows["deep"]["claimed_done_percent"] == rows["linked"]["measured_distance"] == ""
     feedback = tmp_path / "grades_feedback"
     assert "the grader measured" in (feedback / "edited.md").read_text()
     assert "another actor file" in (feedback / "swapped.md").read_text()
+    assert "nested more than" in (feedback / "deep.md").read_text()
+    linked = (feedback / "linked.md").read_text()
+    assert "symbolic link" in linked
+    assert submission.sha256_of(tmp_path / SECRET)[:8] not in linked and "42" not in linked
     board = leaderboard_markdown(graded).splitlines()
-    assert [line.split(" | ")[1] for line in board[2:]] == ["honest", "edited", "swapped"]
-    assert board[2].split(" | ")[3] == "yes" and board[3].split(" | ")[3] == "no"
+    table = [line.split(" | ") for line in board if line.startswith("| ") and
+             line[2].isdigit()]
+    assert [cells[1] for cells in table] == ["honest", "edited", "deep", "linked", "swapped"]
+    assert table[0][2] == "yes" and table[1][2] == "no"
+    assert "Measured" in board[0] and "Claimed" in board[0]
+    header = next(line for line in board if line.startswith("| # "))
+    assert "done % (measured)" in header and "transitions (claimed)" in header
 
 
-def test_the_leaderboard_puts_verified_claims_first():
-    rows = [{"student": "ann", "claimed_done_percent": 100.0, "done_verified": 0},
-            {"student": "bea", "claimed_done_percent": 50.0, "done_verified": 1},
-            {"student": "cy", "claimed_done_percent": "", "done_verified": 0},
-            {"student": "dan", "claimed_done_percent": 75.0, "done_verified": 1,
-             "run_transitions": 9000, "run_episodes": 150}]
+def test_the_leaderboard_puts_accepted_agents_first_and_says_what_was_measured():
+    rows = [{"student": "ann", "own_agent_report": 0, "claimed_done_percent": 100.0,
+             "measured_done_percent": 0.0, "measured_distance": 0.15, "report_verified": 0},
+            {"student": "bea", "own_agent_report": 2, "claimed_done_percent": 50.0,
+             "measured_done_percent": 50.0, "measured_distance": 0.06,
+             "do_nothing_distance": 0.158, "report_verified": 1},
+            {"student": "cy", "own_agent_report": 0, "claimed_done_percent": "",
+             "measured_done_percent": ""},
+            {"student": "dan", "own_agent_report": 2, "claimed_done_percent": 75.0,
+             "measured_done_percent": 75.0, "measured_distance": 0.048,
+             "do_nothing_distance": 0.158, "report_verified": 1,
+             "claimed_run_transitions": 9000, "claimed_run_episodes": 150}]
     board = leaderboard_markdown(rows).splitlines()
-    assert [line.split(" | ")[1] for line in board[2:]] == ["dan", "bea", "ann", "cy"]
-    assert board[2] == "| 1 | dan | 75 | yes | 9000 | 150 |"
-    assert board[5] == "| 4 | cy |  | no |  |  |"
+    table = [line for line in board if line.startswith("| ") and line[2].isdigit()]
+    assert [line.split(" | ")[1] for line in table] == ["dan", "bea", "ann", "cy"]
+    assert table[0] == "| 1 | dan | yes | 75 | 0.048 | 0.158 | yes | 75 | 9000 | 150 |"
+    assert table[2] == "| 3 | ann | no | 0 | 0.150 |  | no | 100 |  |  |"
+    assert table[3] == "| 4 | cy | no |  |  |  |  |  |  |  |"
+
+
+@pytest.mark.slow
+def test_the_attempts_of_issue_37_score_zero_through_course_grade(trained_hand_in, tmp_path):
+    """As a student who wants the points without training would try, each through the real
+    `dlo-course course grade` on the lesson 13 notebook of a released student bundle: the
+    shipped 2-node actor with one weight changed by 1e-6, all weights scaled by 1.0001,
+    loaded and saved again, or with a byte appended (each with a report made consistent with
+    its bytes, or the shipped actor's real report unchanged); a seed's agent unchanged; an
+    untrained actor with its honest report. Every one scores 0, and the leaderboard accepts
+    none of them."""
+    from click.testing import CliRunner
+
+    from dlo_course.cli import main
+    from dlo_course.grading.bundle import release_student
+
+    bundle = tmp_path / "bundle"
+    release_student(bundle)
+    notebook = bundle / "lessons" / f"{CAPSTONE}.ipynb"
+    folder, shipped_report = trained_hand_in
+    actors = tmp_path / "actors"
+    actors.mkdir()
+
+    def one_weight(actor):
+        next(actor.net.parameters()).view(-1)[0] += 1e-6
+
+    def scaled(actor):
+        for value in actor.state_dict().values():
+            if value.is_floating_point():
+                value.mul_(1.0001)
+
+    appended = actors / "appended.pt"
+    appended.write_bytes(SHIPPED2.read_bytes() + b"\n")
+    seed = sorted((AGENTS_DIR / "seeds").rglob(submission.ACTOR_NAME))[0]
+    disguised = {"nudged": changed_actor(SHIPPED2, actors / "w.pt", one_weight),
+                 "scaled": changed_actor(SHIPPED2, actors / "s.pt", scaled),
+                 "resaved": changed_actor(SHIPPED2, actors / "r.pt", lambda actor: None),
+                 "appended": appended, "seed": seed}
+    students = tmp_path / "class"
+    for name, actor in disguised.items():
+        hand_in = students / name / submission.SUBMISSION_DIR
+        hand_in.mkdir(parents=True)
+        shutil.copyfile(actor, hand_in / submission.ACTOR_NAME)
+        report = dict(shipped_report, actor_sha256=submission.sha256_of(actor))
+        (hand_in / submission.REPORT_NAME).write_text(json.dumps(report))
+    shutil.copytree(folder, students / "shipped_report" / submission.SUBMISSION_DIR)
+    shutil.copyfile(disguised["nudged"], students / "shipped_report" / submission.SUBMISSION_DIR
+                    / submission.ACTOR_NAME)
+    untrained = run_of(fresh_actor(actors / "fresh.pt", seed=3), tmp_path / "untrained_run")
+    honest = submission.write_submission(untrained, students / "untrained" /
+                                         submission.SUBMISSION_DIR)
+    assert honest["done_percent"] == 0  # its honest report: nothing reached
+    for student in students.iterdir():
+        shutil.copyfile(notebook, student / notebook.name)
+
+    out = tmp_path / "grades.csv"
+    result = CliRunner().invoke(main, [
+        "course", "grade", str(students), "--out", str(out), "--jobs", "2",
+        "--leaderboard", str(tmp_path / "agents.md")])
+    assert result.exit_code == 0, result.output
+    with out.open(newline="", encoding="utf-8") as f:
+        rows = {row["student"]: row for row in csv.DictReader(f)}
+    assert sorted(rows) == sorted([*disguised, "shipped_report", "untrained"])
+    assert {name: float(row["own_agent_report"]) for name, row in rows.items()} == \
+        dict.fromkeys(rows, 0.0)
+    sheets = {name: (tmp_path / "grades_feedback" / f"{name}.md").read_text() for name in rows}
+    for name in ("nudged", "scaled", "resaved", "appended"):
+        assert "behaves like the shipped checkpoints/nodes2/actor.pt" in sheets[name], name
+    assert "shipped agent" in sheets["seed"]
+    assert "another actor file" in sheets["shipped_report"]
+    assert "learned too little" in sheets["untrained"]
+    assert rows["untrained"]["report_verified"] == "1"  # honest, and still no points
+    board = (tmp_path / "agents.md").read_text().splitlines()
+    table = [line.split(" | ") for line in board if line.startswith("| ") and line[2].isdigit()]
+    assert len(table) == len(rows) and all(cells[2] == "no" for cells in table)

@@ -85,9 +85,9 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     that student's notebooks. Columns: ``student``, one column of points per exercise and
     written answer (in the order of the course), ``total``, ``max_total``, ``error`` (empty
     when grading ran), the student's own agent as handed in with lesson 13, when it is
-    graded (:data:`dlo_course.submission.CSV_COLUMNS`: the done % its report claims, whether
-    the grader's evaluation verified it, the run's transitions and episodes; empty when
-    absent),
+    graded (:data:`dlo_course.submission.CSV_COLUMNS`: what the grader measured of the
+    handed-in actor, whether the report says so, and what the report claims of its training
+    run; empty when absent),
     then one column ``<answer>_text`` per written answer holding what the
     student wrote, verbatim, each followed by ``<answer>_rubric``: the criteria of its rubric
     met, e.g. ``1/2 met; missing: gives a reason`` (empty without a rubric).
@@ -126,12 +126,19 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
         futures = {pool.submit(grade_folder, student, tests, timeout, shared): i
                    for i, student in enumerate(students)}
         for future in as_completed(futures):
-            reports[futures[future]] = future.result()
+            try:
+                reports[futures[future]] = future.result()
+            except Exception as err:  # noqa: BLE001 - one student's grading, not the class's
+                reports[futures[future]] = _failed_report(err)
             bar.set_postfix(last=students[futures[future]].name)
             bar.update(1)
     rows = []
     for student, report in zip(students, reports):
-        (logs / f"{student.name}.txt").write_text(report["output"], encoding="utf-8")
+        (logs / f"{student.name}.txt").write_text(str(report.get("output", "")),
+                                                   encoding="utf-8", errors="replace")
+        if not _well_formed(report):
+            report = _failed_report(ValueError("the grader's report of this student is "
+                                               "malformed"), report.get("output", ""))
         earned = {e["exercise"]: e["earned"] for e in report["exercises"]}
         columns += [name for name in earned if name not in columns]
         texts += [e["exercise"] for e in report["exercises"]
@@ -145,8 +152,11 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
                     for e in report["exercises"] if "rubric" in e})
         row.update(_own_agent_fields(student, report))
         rows.append(row)
-        (feedback / f"{student.name}.md").write_text(
-            feedback_markdown(student.name, report, known, max_total), encoding="utf-8")
+        try:
+            sheet = feedback_markdown(student.name, report, known, max_total)
+        except Exception as err:  # noqa: BLE001 - the CSV row stands without its sheet
+            sheet = f"# {student.name}\n\nThe feedback sheet could not be written ({err!r:.200}).\n"
+        (feedback / f"{student.name}.md").write_text(sheet, encoding="utf-8", errors="replace")
     out.parent.mkdir(parents=True, exist_ok=True)
     text_columns = [f"{name}_{part}" for name in texts for part in ("text", "rubric")]
     own_columns = list(CSV_COLUMNS) if OWN_AGENT_ITEM in columns else []  # lesson 13 graded
@@ -162,35 +172,85 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     return rows
 
 
+def _failed_report(err: BaseException, output: str = "") -> dict[str, Any]:
+    """:func:`grade_folder`'s report of a student whose grading failed in the grader itself:
+    no points, the error said."""
+    return {"exercises": [], "total": 0, "max_total": 0, "returncode": -1,
+            "error": f"grading failed: {type(err).__name__}: {str(err)[:300]}",
+            "output": f"{output}\ngrading failed: {err!r:.2000}"}
+
+
+def _well_formed(report: Any) -> bool:
+    """Whether a grades report has the shape :func:`grade` reads (it comes from a pytest run
+    whose notebooks and hand-ins are the student's)."""
+    items = report.get("exercises") if isinstance(report, dict) else None
+    return isinstance(items, list) and all(
+        isinstance(e, dict) and isinstance(e.get("exercise"), str)
+        and isinstance(e.get("earned"), (int, float)) and isinstance(e.get("points"), (int, float))
+        for e in items) and isinstance(report.get("total"), (int, float))
+
+
 def _own_agent_fields(student: Path, report: dict[str, Any]) -> dict[str, Any]:
-    """The class CSV's columns of a student's handed-in agent (:func:`csv_fields`), verified
-    when the grader gave ``own_agent_report`` its points."""
-    graded = [e for e in report["exercises"] if e["exercise"] == OWN_AGENT_ITEM]
-    verified = None if not graded else all(e["earned"] == e["points"] for e in graded)
+    """The class CSV's columns of a student's handed-in agent (:func:`csv_fields`): what the
+    grader measured (recorded with ``own_agent_report``'s grade) and what the report claims.
+    Never raises: whatever the student handed in, the class is graded to its end."""
+    graded = [e for e in report.get("exercises", []) if e.get("exercise") == OWN_AGENT_ITEM]
+    measured = graded[0].get("measured") if graded else None
     try:
         folder = find_notebook(student, OWN_AGENT_NOTEBOOK).parent / SUBMISSION_DIR
-    except ExerciseError:
+    except (ExerciseError, OSError):
         folder = None
-    return csv_fields(folder, verified)
+    try:
+        return csv_fields(folder, measured)
+    except Exception:  # noqa: BLE001 - a hand-in must never stop a class's grading
+        return csv_fields(None, measured)
+
+
+LEADERBOARD_NOTE = (
+    "Measured: by the grader, at grading time, with the handed-in actor on the graded protocol "
+    "(done %, mean final distance) and without moving (doing nothing). Claimed: from the "
+    "student's report.json, which nothing checks (the training run's transitions and "
+    "episodes). Own agent: the 2 points of `own_agent_report` (a 2-node agent the student "
+    "trained, above the learning floor, with a report that says what it does).")
 
 
 def leaderboard_markdown(rows: Iterable[dict[str, Any]]) -> str:
-    """The class's own agents as a Markdown table, from :func:`grade`'s rows: the students
-    whose report the grader verified first, by done % on the graded protocol (best first),
-    then the claims it could not verify, then those who handed nothing in; ties by name."""
-    def key(row):
-        claimed = row.get("claimed_done_percent", "")
-        rank = 0 if row.get("done_verified") == 1 else 1 if claimed != "" else 2
-        return rank, -(claimed if claimed != "" else 0.0), row["student"]
+    """The class's own agents as a Markdown table, from :func:`grade`'s rows: the agents that
+    earned ``own_agent_report``'s points first, by the grader's measured done % on the graded
+    protocol (best first), then mean distance; then the other agents the grader evaluated;
+    then those it did not evaluate (nothing handed in, or refused before evaluation); ties by
+    name. Measured and claimed numbers sit in columns of their own (:data:`LEADERBOARD_NOTE`)."""
+    def number(value, default):
+        return value if isinstance(value, (int, float)) and not isinstance(value, bool) \
+            else default
 
-    lines = ["| # | student | done % (graded protocol) | verified | transitions | episodes |",
-             "|---|---|---|---|---|---|"]
+    def accepted(row):
+        points = row.get(OWN_AGENT_ITEM, 0)
+        return number(points, 0) > 0 and row.get("measured_done_percent", "") != ""
+
+    def key(row):
+        rank = 0 if accepted(row) else 1 if row.get("measured_done_percent", "") != "" else 2
+        return (rank, -number(row.get("measured_done_percent"), 0.0),
+                number(row.get("measured_distance"), float("inf")), row["student"])
+
+    def cell(value, fmt="g"):
+        return "" if value in ("", None) else format(value, fmt) if not isinstance(
+            value, str) else value
+
+    lines = [LEADERBOARD_NOTE, "",
+             "| # | student | own agent | done % (measured) | mean distance, m (measured) | "
+             "doing nothing, m (measured) | report matches | done % (claimed) | transitions "
+             "(claimed) | episodes (claimed) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for place, row in enumerate(sorted(rows, key=key), start=1):
-        claimed = row.get("claimed_done_percent", "")
-        status = {1: "yes", 0: "no"}.get(row.get("done_verified"), "")
-        lines.append(f"| {place} | {row['student']} | "
-                     f"{'' if claimed == '' else f'{claimed:g}'} | {status} | "
-                     f"{row.get('run_transitions', '')} | {row.get('run_episodes', '')} |")
+        status = {1: "yes", 0: "no"}.get(row.get("report_verified"), "")
+        lines.append(f"| {place} | {row['student']} | {'yes' if accepted(row) else 'no'} | "
+                     f"{cell(row.get('measured_done_percent', ''))} | "
+                     f"{cell(row.get('measured_distance', ''), '.3f')} | "
+                     f"{cell(row.get('do_nothing_distance', ''), '.3f')} | {status} | "
+                     f"{cell(row.get('claimed_done_percent', ''))} | "
+                     f"{cell(row.get('claimed_run_transitions', ''))} | "
+                     f"{cell(row.get('claimed_run_episodes', ''))} |")
     return "\n".join(lines) + "\n"
 
 

@@ -156,7 +156,7 @@ def _grade_items() -> list[dict]:
         entry["outcomes"].append(record["outcome"])
         if record.get("message") and not entry.get("message"):
             entry["message"] = record["message"]
-        for key in ("text", "rubric"):
+        for key in ("text", "rubric", "measured"):
             if key in record:
                 entry[key] = record[key]
     items = []
@@ -357,6 +357,14 @@ def data_probe():
         return result["value"]
 
     return run
+
+
+@pytest.fixture
+def grade_record(request) -> dict:
+    """The grades' record of this test's exercise: a test may add plain data under
+    ``"measured"`` (what the grader measured of a hand-in), which goes into the grades JSON
+    and the class CSV. A dict of its own when the test grades no exercise."""
+    return _GRADES.get(request.node.nodeid, {})
 
 
 @pytest.fixture

@@ -101,6 +101,18 @@ def test_analysis_next_step(written_answer):
 REEVALUATION_TIMEOUT = 150.0
 
 
+def probe_behaviour(_, actor_bytes):
+    """In a sandbox worker that runs none of the student's code: the handed-in actor file's
+    node count and actions on the probe observations (no simulation)."""
+    from pathlib import Path
+
+    from dlo_course.submission import actor_behaviour
+
+    path = Path("handed_in_actor.pt")  # in the worker's scratch folder
+    path.write_bytes(actor_bytes)
+    return actor_behaviour(path)
+
+
 def probe_reevaluate(_, actor_bytes):
     """In a sandbox worker that runs none of the student's code: the handed-in actor file
     (loaded with weights_only=True) on the graded protocol, as the library measures it."""
@@ -114,16 +126,22 @@ def probe_reevaluate(_, actor_bytes):
 
 
 def shipped_actor_digests():
-    from dlo_course.paths import AGENTS_DIR
-    from dlo_course.submission import ACTOR_NAME, sha256_of
+    from dlo_course.submission import sha256_of, shipped_actor_files
 
-    return tuple(sha256_of(p) for p in sorted(AGENTS_DIR.glob(f"nodes*/{ACTOR_NAME}")))
+    return tuple(sha256_of(p) for p in shipped_actor_files())
 
 
 @pytest.mark.timeout(REEVALUATION_TIMEOUT + 240)
 @pytest.mark.exercise("own_agent_report", points=2)
-def test_own_agent_report(notebook_folder, data_probe):
-    from dlo_course.submission import (SUBMISSION_DIR, SubmissionError, read_submission,
+def test_own_agent_report(notebook_folder, data_probe, grade_record):
+    """The points reward an agent the student trained in lesson 9, as the grader measures
+    it: 2 nodes and behaving like no shipped actor
+    (:func:`dlo_course.submission.likeness_problems`, checked first: no simulation), above
+    the learning floor (:func:`dlo_course.submission.floor_problems`), with a report that
+    says what it does (:func:`dlo_course.submission.report_problems`). What the grader
+    measured goes into the grades, for the class CSV and the leaderboard."""
+    from dlo_course.submission import (SUBMISSION_DIR, SubmissionError, floor_problems,
+                                       likeness_problems, measured_fields, read_submission,
                                        report_problems)
 
     try:
@@ -133,8 +151,11 @@ def test_own_agent_report(notebook_folder, data_probe):
     forbidden = shipped_actor_digests()
     problems = report_problems(report, actor_bytes, None, forbidden)  # before any simulation
     if not problems:
-        measured = data_probe(probe_reevaluate, actor_bytes,
-                              timeout=REEVALUATION_TIMEOUT)
+        problems = likeness_problems(data_probe(probe_behaviour, actor_bytes))
+    if not problems:
+        measured = data_probe(probe_reevaluate, actor_bytes, timeout=REEVALUATION_TIMEOUT)
         problems = report_problems(report, actor_bytes, measured, forbidden)
-    assert not problems, ("own_agent_report: the report does not describe the handed-in "
-                          "actor:\n- " + "\n- ".join(problems))
+        grade_record["measured"] = measured_fields(measured, report_matches=not problems)
+        problems += floor_problems(measured)
+    assert not problems, ("own_agent_report: no points for the handed-in agent:\n- "
+                          + "\n- ".join(problems))
