@@ -64,16 +64,33 @@ def fresh_run(folder: Path) -> Path:
 @pytest.fixture(scope="module")
 def handed_in(tmp_path_factory) -> Path:
     """Lesson 13's hand-in folder of a fresh actor, written once by the library (one
-    evaluation of the graded protocol); copy it beside a notebook to grade it."""
+    evaluation of the graded protocol), and beside it lesson 04's Pendulum actor, trained
+    once by lesson 04's training with the library's pieces (about 15 s of CPU); copy them
+    beside the notebooks to grade them (:func:`hand_in`)."""
+    import torch
+
+    from dlo_course import pendulum
+    from dlo_course.ddpg import save_network
     from dlo_course.submission import SUBMISSION_DIR, write_submission
 
     root = tmp_path_factory.mktemp("handed_in")
     write_submission(fresh_run(root / "run"), root / SUBMISSION_DIR)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        agent, _ = pendulum.train_pendulum()
+    finally:
+        torch.set_num_threads(threads)
+    save_network(agent.actor, root / pendulum.ACTOR_FILE)
     return root / SUBMISSION_DIR
 
 
 def hand_in(handed_in: Path, folder: Path) -> None:
+    """Lesson 13's hand-in folder and lesson 04's Pendulum actor, into ``folder``."""
+    from dlo_course.pendulum import ACTOR_FILE
+
     shutil.copytree(handed_in, folder / handed_in.name)
+    shutil.copyfile(handed_in.parent / ACTOR_FILE, folder / ACTOR_FILE)
 
 
 def handed_in_run(handed_in: Path) -> tuple[int, int]:
@@ -298,7 +315,7 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
     assert float(alice["total"]) == sum(points[n] for n in handed)
     bob = rows["bob"]
     lost = {"bellman_target", "discounted_return", "critic_loss", "RingBuffer", "prediction_ring",
-            "own_agent_report"} | (set(points) - handed)
+            "own_agent_report", "pendulum_agent"} | (set(points) - handed)
     for name, value in points.items():
         expected = 0 if name in lost else value
         assert float(bob[name]) == expected, f"bob's {name}: {bob[name]}, expected {expected}"
@@ -475,6 +492,9 @@ def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path,
     assert time.perf_counter() - started < 240, f"{path.name} is too slow on the fast budget"
 
 
+# Exercises graded from files handed in beside the notebooks, not from their cells
+HANDED_IN_ITEMS = ("own_agent_report", "pendulum_agent")
+
 # Exercises whose solution calls earlier answers of its notebook: graded right only with them
 USES_EARLIER = {"Critic": ("build_mlp",),
                 "sweep_offsets_inside": ("level_moves",),
@@ -532,8 +552,9 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
                 got = 0
                 if choice in (1, 2):
                     cell["source"] = solved[exercise].splitlines(keepends=True)
-                    # own_agent_report is graded from lesson 13's hand-in, which no one makes
-                    got = 0 if exercise == "own_agent_report" else points[exercise]
+                    # graded from what is handed in beside the notebooks (lesson 13's
+                    # folder, lesson 04's Pendulum actor), which no one here hands in
+                    got = 0 if exercise in HANDED_IN_ITEMS else points[exercise]
                 elif choice == 3:
                     old, new = MUTANTS[exercise][0][1:3]
                     cell["source"] = mutate(solved[exercise], old, new).splitlines(keepends=True)

@@ -121,6 +121,9 @@ MUTANTS: dict[str, list[tuple]] = {
          "loss_pi = agent.critic(obs, agent.actor(obs)).mean()"),
         ("policy loss summed, not averaged", "loss_pi = -agent.critic(obs, agent.actor(obs)).mean()",
          "loss_pi = -agent.critic(obs, agent.actor(obs)).sum()")],
+    "pendulum_agent": [  # graded from the actor file beside the notebook, which these lack
+        ("trains no step", "steps=steps, seed=seed", "steps=0, seed=seed"),
+        ("saves nothing", "        ddpg.save_network(agent.actor, path)\n", "        pass\n")],
     "prediction_actor": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "0.5 and 1.")],
