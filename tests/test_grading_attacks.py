@@ -226,6 +226,20 @@ def grade_attacked(root: Path) -> dict:
     from test_course import fresh_run
 
     write_submission(fresh_run(root / "run"), root / "student" / SUBMISSION_DIR)
+    # Likewise lesson 04's Pendulum actor, graded from its file (pendulum_agent): trained by
+    # lesson 04's training with the library's pieces, about 15 s of CPU.
+    import torch
+
+    from dlo_course import pendulum
+    from dlo_course.ddpg import save_network
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        agent, _ = pendulum.train_pendulum()
+    finally:
+        torch.set_num_threads(threads)
+    save_network(agent.actor, root / "student" / pendulum.ACTOR_FILE)
     out = root / "grades.json"
     env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="8", DLO_COURSE_GRADING_MEMORY_MB="1024")
     proc = subprocess.run(grading_command(root / "student", json_out=out), cwd=REPO,
