@@ -360,17 +360,12 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, 
              "the intervals are wide — so: more episodes first, then longer training, on more "
              "ranks, before any claim of a reproduction can be made by anyone.")
     nb = notebooks.read_notebook(LESSONS / f"{CAPSTONE}.ipynb")
-    solved = {notebooks.exercise_info(c)["exercise"]: notebooks.cell_source(c)
-              for c in notebooks.read_notebook(SOLUTIONS / f"{CAPSTONE}.ipynb")["cells"]
-              if notebooks.exercise_info(c)}
     for cell in nb["cells"]:
         info = notebooks.graded_info(cell)
         if info is None:
             continue
         source = notebooks.cell_source(cell)
-        if info["exercise"] == "count_not_worse":  # a wrong answer: counts the wrong cells
-            source = solved["count_not_worse"].replace('!= "below"', '== "below"')
-        elif info["exercise"] == "analysis_next_step":
+        if info["exercise"] == "analysis_next_step":
             source = source.replace(notebooks.ANSWER_PLACEHOLDER, essay)
         elif info["exercise"] == "prediction_cells":
             source = source.replace(notebooks.ANSWER_PLACEHOLDER, "Six.")
@@ -400,7 +395,6 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, 
     assert float(bob["analysis_next_step"]) == points["analysis_next_step"]
     assert bob["prediction_cells_text"] == "Six." and float(bob["prediction_cells"]) == 0
     assert bob["analysis_comparison_text"] == "" and float(bob["analysis_comparison"]) == 0
-    assert float(bob["count_not_worse"]) == 0
     # the hand-in: alice's verified report (a fresh actor: no goal reached), bob's absent
     assert float(alice["own_agent_report"]) == points["own_agent_report"]
     assert (alice["claimed_done_percent"], alice["done_verified"]) == ("0.0", "1")
@@ -417,8 +411,6 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, 
     assert "Every check passed." in (feedback / "alice.md").read_text()
     sheet = (feedback / "bob.md").read_text()
     assert f"**Total: {float(bob['total']):g} / {sum(points.values()):g} points.**" in sheet
-    assert "| `count_not_worse` | 0 / 3 | failed |" in sheet
-    assert "### `count_not_worse`" in sheet and "count the verdicts" in sheet
     assert "### `own_agent_report`" in sheet and "no report.json" in sheet
     assert "1 word: this answer needs at least 10 words" in sheet
     assert "no answer written" in sheet  # analysis_comparison
@@ -479,7 +471,8 @@ def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path,
 USES_EARLIER = {"Critic": ("build_mlp",),
                 "sweep_offsets_inside": ("level_moves",),
                 "td3_target": ("smoothed_target_action",),
-                "td3_update": ("td3_target", "smoothed_target_action")}
+                "td3_update": ("td3_target", "smoothed_target_action"),
+                "table_verdict": ("wilson_interval",)}
 
 
 def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
