@@ -220,14 +220,24 @@ def grade_attacked(root: Path) -> dict:
     canary = root / "outside" / "canary.txt"
     canary.parent.mkdir(parents=True)
     attacked_submission(root / "student", canary)
-    # A genuine hand-in of lesson 13 (a fresh actor), so that own_agent_report, graded from
-    # files rather than a cell, must keep its points whatever the other cells attack.
-    from dlo_course.submission import SUBMISSION_DIR, write_submission
-    from test_course import fresh_run
+    # A genuine hand-in of lesson 13 (an agent that learned: the shipped 2-node actor, graded
+    # in an installation that does not ship it), so that own_agent_report, graded from files
+    # rather than a cell, must keep its points whatever the other cells attack.
+    import shutil
 
-    write_submission(fresh_run(root / "run"), root / "student" / SUBMISSION_DIR)
+    from dlo_course.paths import AGENTS_DIR, DATA_DIR
+    from dlo_course.submission import SUBMISSION_DIR, write_submission
+
+    run = root / "run"
+    run.mkdir()
+    for name in ("actor.pt", "config.json", "progress.csv"):
+        shutil.copyfile(AGENTS_DIR / "nodes2" / name, run / name)
+    write_submission(run, root / "student" / SUBMISSION_DIR)
+    data = root / "installation" / "data"
+    shutil.copytree(DATA_DIR, data, ignore=shutil.ignore_patterns("nodes2"))
     out = root / "grades.json"
-    env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="8", DLO_COURSE_GRADING_MEMORY_MB="1024")
+    env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="8", DLO_COURSE_GRADING_MEMORY_MB="1024",
+               DLO_COURSE_DATA=str(data))
     proc = subprocess.run(grading_command(root / "student", json_out=out), cwd=REPO,
                           env=env, capture_output=True, text=True, timeout=900)
     assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"

@@ -61,6 +61,7 @@ def library_tip_target(tip, action, initial_tip, params):
     scene = SimpleNamespace(params=params, initial_tip=np.asarray(initial_tip),
                             tip_position=lambda: np.asarray(tip))
     scene.workspace = RodScene.workspace.fget(scene)
+    scene.clip_to_workspace = lambda target: RodScene.clip_to_workspace(scene, target)
     return RodScene.tip_target(scene, np.asarray(action))
 
 
