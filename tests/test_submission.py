@@ -34,6 +34,18 @@ CAPSTONE = "13_capstone_table_one"
 SHIPPED2 = AGENTS_DIR / "nodes2" / submission.ACTOR_NAME
 
 
+
+def one_weight(actor):
+    """Change one weight of ``actor`` by 1e-6 (a hand-in that is the shipped actor nudged)."""
+    next(actor.net.parameters()).view(-1)[0] += 1e-6
+
+
+def scaled(actor):
+    """Scale every weight of ``actor`` by 1.0001 (the shipped actor, rescaled)."""
+    for value in actor.state_dict().values():
+        if value.is_floating_point():
+            value.mul_(1.0001)
+
 def fresh_actor(path: Path, seed: int) -> Path:
     torch.manual_seed(seed)
     save_network(Actor(observation_size(2), 3), path)
@@ -149,13 +161,6 @@ def test_actors_that_behave_like_a_shipped_one_are_refused_whatever_their_bytes(
     """The student's attempts of issue 37, without simulation: a shipped actor changed by
     1e-6, scaled by 1.0001, loaded and saved again, or with a byte appended behaves like the
     shipped one; a seed's agent has 6 nodes; a fresh actor behaves like none of them."""
-    def one_weight(actor):
-        next(actor.net.parameters()).view(-1)[0] += 1e-6
-
-    def scaled(actor):
-        for value in actor.state_dict().values():
-            if value.is_floating_point():
-                value.mul_(1.0001)
 
     attempts = [changed_actor(SHIPPED2, tmp_path / "w.pt", one_weight),
                 changed_actor(SHIPPED2, tmp_path / "s.pt", scaled),
@@ -416,13 +421,6 @@ def test_the_attempts_of_issue_37_score_zero_through_course_grade(trained_hand_i
     actors = tmp_path / "actors"
     actors.mkdir()
 
-    def one_weight(actor):
-        next(actor.net.parameters()).view(-1)[0] += 1e-6
-
-    def scaled(actor):
-        for value in actor.state_dict().values():
-            if value.is_floating_point():
-                value.mul_(1.0001)
 
     appended = actors / "appended.pt"
     appended.write_bytes(SHIPPED2.read_bytes() + b"\n")
