@@ -385,12 +385,17 @@ class DDPG:
             when ``config.normalize_obs`` is set (e.g. from
             :meth:`DLOShapeEnv.observation_reference`).
         rules: the formulas :meth:`update` uses (:class:`UpdateRules`); the paper's by default.
+        critic_class: the critics' class, called as ``critic_class(obs_dim, act_dim,
+            hidden_sizes, final_init)`` (plus ``obs_offset=, obs_scale=`` with
+            ``normalize_obs``): :class:`Critic` by default; lesson 04 trains with the
+            student's (:mod:`dlo_course.pendulum`).
     """
 
     def __init__(self, obs_dim: int, act_dim: int, action_low: Any = -1.0,
                  action_high: Any = 1.0, config: DDPGConfig | None = None,
                  obs_offset: Any = None, obs_scale: Any = None,
-                 rules: UpdateRules | None = None) -> None:
+                 rules: UpdateRules | None = None,
+                 critic_class: Callable[..., nn.Module] | None = None) -> None:
         self.config = cfg = config or DDPGConfig()
         self.rules = rules or UpdateRules()
         if cfg.normalize_obs and (obs_offset is None or obs_scale is None):
@@ -399,12 +404,16 @@ class DDPG:
             obs_offset = obs_scale = None
         self.actor = Actor(obs_dim, act_dim, action_low, action_high, cfg.hidden_sizes,
                            cfg.final_init, obs_offset, obs_scale)
-        self.critic = Critic(obs_dim, act_dim, cfg.hidden_sizes, cfg.final_init,
-                             obs_offset, obs_scale)
+        critic_class = critic_class or Critic
+        # Without normalize_obs the scaling is left out, so a critic class without it fits.
+        scaling = (dict(obs_offset=obs_offset, obs_scale=obs_scale) if cfg.normalize_obs
+                   else {})
+        self.critic = critic_class(obs_dim, act_dim, cfg.hidden_sizes, cfg.final_init,
+                                   **scaling)
         # Created after the first critic, so that the actor and the first critic start from
         # the same weights with or without it.
-        self.critic2 = (Critic(obs_dim, act_dim, cfg.hidden_sizes, cfg.final_init,
-                               obs_offset, obs_scale) if cfg.twin_critics else None)
+        self.critic2 = (critic_class(obs_dim, act_dim, cfg.hidden_sizes, cfg.final_init,
+                                     **scaling) if cfg.twin_critics else None)
         # Targets start as exact copies and are only ever changed by polyak_update.
         self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
         self.critic_target = copy.deepcopy(self.critic).requires_grad_(False)

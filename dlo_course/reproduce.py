@@ -29,7 +29,7 @@ from tqdm.auto import tqdm
 from dlo_course import mpi
 from dlo_course.config import DDPGConfig, TrainConfig, preset
 from dlo_course.database import BOXES, load_database
-from dlo_course.evaluation import evaluate_thresholds, load_actor
+from dlo_course.evaluation import evaluate_thresholds, load_actor, wilson_interval
 from dlo_course.paths import AGENTS_DIR, DATA_DIR
 from dlo_course.plots import plot_deformation, plot_learning_curves
 from dlo_course.rundir import agent_dir, training_record, write_json
@@ -207,6 +207,15 @@ def verdict(row: dict, paper_done: float) -> str:
     if paper_done > row["done_ci_high"]:
         return "below"
     return "within"
+
+
+def done_verdict(successes: int, episodes: int, paper_done: float) -> str:
+    """:func:`verdict` of a done % measured as ``successes`` of ``episodes``: its 95% Wilson
+    interval (:func:`dlo_course.evaluation.wilson_interval`), in percent, against the paper's
+    done % (``paper_done``, in percent). Lesson 10's ``table_verdict``; lessons 11 and 13 use
+    it."""
+    low, high = (100 * x for x in wilson_interval(successes, episodes))
+    return verdict({"done_ci_low": low, "done_ci_high": high}, paper_done)
 
 
 def write_table(rows: list[dict], paper: dict, out: Path, name: str = "table1"

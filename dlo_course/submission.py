@@ -88,6 +88,34 @@ def actor_file(agent: str | Path) -> Path:
 LESSON_N_NODES = 2
 """The node count of lesson 9's agent: a hand-in of another node count is not that agent."""
 
+LESSON_EPISODES = 100
+"""Episodes of lesson 9's training (one agent, at most 60 actions each, ending at the goal):
+at most 6 000 transitions, 1% of the paper's 604 800."""
+
+
+def lesson_run_config(out_dir: str | Path, episodes: int = LESSON_EPISODES, fast: bool = False):
+    """The :class:`~dlo_course.config.TrainConfig` of lesson 9's own agent, which lesson 13
+    hands in: the ``recipe`` preset on 2 nodes (its 0.03 m training threshold), one agent in
+    the notebook's process, trained by the student's ``play_episode``
+    (:func:`dlo_course.trainer.train` with ``play_episode=``), so its episodes end at the
+    goal; no validation (the last actor is kept); the resume state every 5 episodes. ``fast``:
+    the course's fast mode, the same mechanics at smoke scale (episodes of 4 steps, batches
+    of 4, the resume state after every episode)."""
+    import dataclasses
+
+    from dlo_course.config import PRESETS, preset
+
+    config = preset("recipe", env_kwargs={**PRESETS["recipe"].env_kwargs,
+                                          "n_nodes": LESSON_N_NODES},
+                    episodes=episodes, stop_at_goal=True, validate_every=0,
+                    checkpoint_every=1 if fast else 5, out_dir=str(out_dir),
+                    expected_agents=None)
+    if fast:
+        config = dataclasses.replace(config, steps_per_episode=4,
+                                     ddpg=dataclasses.replace(config.ddpg, batch_size=4))
+    return config
+
+
 PROBE_COUNT, PROBE_SEED = 256, 0
 """How many observations :func:`probe_observations` draws, and from which seed."""
 

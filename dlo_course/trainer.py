@@ -43,7 +43,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import gymnasium
 import numpy as np
@@ -164,6 +164,91 @@ def run_episode(env: gymnasium.Env, agent: DDPG, buffer: ReplayBuffer, noise: OU
         "policy_loss": mean_of("policy_loss"),
         "q_mean": mean_of("q_mean"),
     }
+
+
+class _EpisodeRecorder:
+    """The replay buffer as an episode function (lesson 09's ``play_episode``) sees it: each
+    transition it adds is stored, and kept for this episode's hindsight copies."""
+
+    def __init__(self, buffer: ReplayBuffer, keep: bool) -> None:
+        self.buffer, self.keep = buffer, keep
+        self.episode: list[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = []
+
+    def add(self, obs, act, rew, next_obs, done) -> None:
+        self.buffer.add(obs, act, rew, next_obs, done)
+        if self.keep:
+            self.episode.append((np.array(obs), np.array(act), float(rew), np.array(next_obs)))
+
+    def __len__(self) -> int:
+        return len(self.buffer)
+
+    def sample(self, batch_size: int) -> dict[str, np.ndarray]:
+        return self.buffer.sample(batch_size)
+
+
+class _ResetWith(gymnasium.Wrapper):
+    """``env`` whose ``reset`` passes the training episode's options (keep the rod's shape,
+    :func:`reset_options`) to an episode function that calls ``env.reset(seed=...)`` only."""
+
+    def __init__(self, env: gymnasium.Env, options: dict[str, Any] | None) -> None:
+        super().__init__(env)
+        self._options = options
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        return self.env.reset(seed=seed, options=self._options if options is None else options)
+
+
+def run_episode_with(play_episode: Callable[..., dict], env: gymnasium.Env, agent: DDPG,
+                     buffer: ReplayBuffer, noise: OUNoise, config: TrainConfig, seed: int,
+                     relabeller: HindsightRelabeller | None = None) -> dict[str, float]:
+    """One agent's training episode played by ``play_episode``, a function with the signature
+    of lesson 09's exercise (``env, policy, buffer, max_steps, seed, update, batch_size,
+    updates_per_step, warmup`` -> dict with ``reward``, ``length``, ``distance``, ``success``,
+    ``updates``): the student's, so that their own episode trains the rod's agent.
+
+    The library supplies the rest, as :func:`run_episode` does: the policy (the actor plus OU
+    noise, reset here), the update (the agent's, one agent: no gradient reduction), the
+    reset options (through a wrapper of ``env``) and, after the episode, the hindsight
+    copies of what ``play_episode`` stored. The episode ends at the goal, as the exercise's
+    does, so ``config.stop_at_goal`` must be True (:func:`train` checks). With ``her_k = 0``
+    and one agent the run is the one :func:`run_episode` gives, bit for bit
+    (``tests/test_trainer.py``); with ``her_k > 0`` the copies are stored after the
+    episode's last updates instead of before them, and transitions of a simulation blow-up
+    are relabelled too (the function does not see ``info``).
+
+    Returns:
+        As :func:`run_episode`; ``critic_loss``, ``policy_loss`` and ``q_mean`` are the means
+        over the updates that ``play_episode`` made.
+    """
+    noise.reset()
+    recorder = _EpisodeRecorder(buffer, keep=relabeller is not None)
+    stats: list[dict[str, float]] = []
+
+    def update(batch: dict[str, np.ndarray]) -> dict[str, float]:
+        stats.append(agent.update(batch))
+        return stats[-1]
+
+    result = play_episode(_ResetWith(env, reset_options(env, config)),
+                          lambda obs: agent.act(obs, noise), recorder, config.steps_per_episode,
+                          seed, update=update, batch_size=config.ddpg.batch_size,
+                          updates_per_step=config.updates_per_step, warmup=config.warmup)
+    if relabeller is not None:
+        _add_hindsight_copies(buffer, relabeller, recorder.episode)
+    missing = {"reward", "length", "distance", "success", "updates"} - set(result)
+    if missing:
+        raise ValueError(f"play_episode returned no {sorted(missing)}")
+    if int(result["updates"]) != len(stats):
+        raise ValueError(f"play_episode says it made {result['updates']} updates; "
+                         f"it called update {len(stats)} times")
+
+    def mean_of(key: str) -> float:
+        values = [s[key] for s in stats if key in s]
+        return float(np.mean(values)) if values else math.nan
+
+    return {"reward": float(result["reward"]), "length": float(result["length"]),
+            "distance": float(result["distance"]), "success": float(result["success"]),
+            "updates": float(len(stats)), "critic_loss": mean_of("critic_loss"),
+            "policy_loss": mean_of("policy_loss"), "q_mean": mean_of("q_mean")}
 
 
 # --- validation: choosing the best actor on held-out goals ---
@@ -348,7 +433,8 @@ def observation_reference(env: gymnasium.Env) -> tuple[np.ndarray, np.ndarray]:
 
 def train(config: TrainConfig, resume: bool = False, progress: bool = True,
           overwrite: bool = False, rules: UpdateRules | None = None,
-          loggers: Sequence[TrainingLogger] = ()) -> Path:
+          loggers: Sequence[TrainingLogger] = (),
+          play_episode: Callable[..., dict] | None = None) -> Path:
     """Train DDPG agents as configured; every MPI rank runs this function as one agent.
 
     Args:
@@ -362,6 +448,11 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
             ``config.json``, so a run trained with other rules records only its settings.
         loggers: hooks that also get every ``progress.csv`` and ``validation.csv`` row
             (:class:`TrainingLogger`; e.g. :class:`TensorBoardLogger`), on rank 0.
+        play_episode: who plays each episode: ``None``, the library (:func:`run_episode`),
+            or a function with the signature of lesson 09's exercise
+            (:func:`run_episode_with`): one agent only (it makes no collective update),
+            episodes that end at the goal (``config.stop_at_goal``). Like ``rules``, not
+            saved in ``config.json``.
 
     Returns:
         The run directory.
@@ -373,6 +464,10 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
         # Every rank sees the same files, so every rank raises: nobody is left waiting.
         raise FileExistsError(f"{out} already holds a run: resume it (--resume) or choose "
                               "another directory (--out), or pass --overwrite")
+    if play_episode is not None and (n_agents > 1 or not config.stop_at_goal):
+        raise ValueError("an episode function (play_episode) trains one agent, whose episodes "
+                         f"end at the goal: run it without mpiexec (here {n_agents} agents) "
+                         f"and with stop_at_goal=True (here {config.stop_at_goal})")
     if root and config.expected_agents and n_agents != config.expected_agents:
         print(f"warning: this configuration is meant for {config.expected_agents} agents "
               f"(mpiexec -n {config.expected_agents}); running with {n_agents}",
@@ -433,8 +528,12 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
     start = time.perf_counter() - counters["elapsed"]
     try:
         for episode in range(counters["episodes_done"], config.episodes):
-            mine = run_episode(env, agent, buffer, noise, config,
-                               _episode_seed(agent_seed, episode), reducer, relabeller)
+            seed = _episode_seed(agent_seed, episode)
+            if play_episode is None:
+                mine = run_episode(env, agent, buffer, noise, config, seed, reducer, relabeller)
+            else:
+                mine = run_episode_with(play_episode, env, agent, buffer, noise, config, seed,
+                                        relabeller)
             per_agent = mpi.allgather(mine)  # every agent's stats, on every rank
             counters["episodes_done"] = episode + 1
             counters["updates"] += int(mine["updates"])  # identical on every rank

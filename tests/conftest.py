@@ -85,3 +85,23 @@ def data_without_the_2_node_agent(tmp_path_factory):
     root = tmp_path_factory.mktemp("installation") / "data"
     shutil.copytree(DATA_DIR, root, ignore=shutil.ignore_patterns("nodes2"))
     return root
+
+
+@pytest.fixture(scope="session")
+def trained_pendulum_actor(tmp_path_factory):
+    """Lesson 04's hand-in: a Pendulum actor trained by lesson 04's training with the library's
+    pieces (seed 0, about 20 s of CPU on one thread), saved where the grader reads it."""
+    import torch
+
+    from dlo_course import pendulum
+    from dlo_course.ddpg import save_network
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        agent, _ = pendulum.train_pendulum()
+    finally:
+        torch.set_num_threads(threads)
+    path = tmp_path_factory.mktemp("pendulum") / pendulum.ACTOR_FILE
+    save_network(agent.actor, path)
+    return path

@@ -45,16 +45,26 @@ def run_grader(notebooks: Path, tmp_path: Path, timeout_per_exercise: float = 60
 
 
 @pytest.fixture
-def handed_in(trained_hand_in, data_without_the_2_node_agent, monkeypatch) -> Path:
-    """Lesson 13's hand-in folder of an agent that learned (tests/conftest.py), graded in an
-    installation that does not ship it, so that it earns its points; copy it beside a
-    notebook to grade it."""
+def handed_in(trained_hand_in, trained_pendulum_actor, data_without_the_2_node_agent,
+              monkeypatch) -> Path:
+    """Lesson 13's hand-in folder of an agent that learned, with lesson 04's Pendulum actor
+    beside it (tests/conftest.py), graded in an installation that does not ship the 2-node
+    agent, so that both earn their points; copy them beside the notebooks to grade them
+    (:func:`hand_in`)."""
+    from dlo_course.pendulum import ACTOR_FILE
+
     monkeypatch.setenv("DLO_COURSE_DATA", str(data_without_the_2_node_agent))
-    return trained_hand_in[0]
+    folder = trained_hand_in[0]
+    shutil.copyfile(trained_pendulum_actor, folder.parent / ACTOR_FILE)
+    return folder
 
 
 def hand_in(handed_in: Path, folder: Path) -> None:
+    """Lesson 13's hand-in folder and lesson 04's Pendulum actor, into ``folder``."""
+    from dlo_course.pendulum import ACTOR_FILE
+
     shutil.copytree(handed_in, folder / handed_in.name)
+    shutil.copyfile(handed_in.parent / ACTOR_FILE, folder / ACTOR_FILE)
 
 
 def report_of(handed_in: Path) -> dict:
@@ -287,7 +297,7 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
     assert float(alice["total"]) == sum(points[n] for n in handed)
     bob = rows["bob"]
     lost = {"bellman_target", "discounted_return", "critic_loss", "RingBuffer", "prediction_ring",
-            "own_agent_report"} | (set(points) - handed)
+            "own_agent_report", "pendulum_agent"} | (set(points) - handed)
     for name, value in points.items():
         expected = 0 if name in lost else value
         assert float(bob[name]) == expected, f"bob's {name}: {bob[name]}, expected {expected}"
@@ -349,17 +359,12 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, 
              "the intervals are wide — so: more episodes first, then longer training, on more "
              "ranks, before any claim of a reproduction can be made by anyone.")
     nb = notebooks.read_notebook(LESSONS / f"{CAPSTONE}.ipynb")
-    solved = {notebooks.exercise_info(c)["exercise"]: notebooks.cell_source(c)
-              for c in notebooks.read_notebook(SOLUTIONS / f"{CAPSTONE}.ipynb")["cells"]
-              if notebooks.exercise_info(c)}
     for cell in nb["cells"]:
         info = notebooks.graded_info(cell)
         if info is None:
             continue
         source = notebooks.cell_source(cell)
-        if info["exercise"] == "count_not_worse":  # a wrong answer: counts the wrong cells
-            source = solved["count_not_worse"].replace('!= "below"', '== "below"')
-        elif info["exercise"] == "analysis_next_step":
+        if info["exercise"] == "analysis_next_step":
             source = source.replace(notebooks.ANSWER_PLACEHOLDER, essay)
         elif info["exercise"] == "prediction_cells":
             source = source.replace(notebooks.ANSWER_PLACEHOLDER, "Six.")
@@ -389,7 +394,6 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, 
     assert float(bob["analysis_next_step"]) == points["analysis_next_step"]
     assert bob["prediction_cells_text"] == "Six." and float(bob["prediction_cells"]) == 0
     assert bob["analysis_comparison_text"] == "" and float(bob["analysis_comparison"]) == 0
-    assert float(bob["count_not_worse"]) == 0
     # the hand-in: alice's agent, measured by the grader, her report verified; bob's absent
     report = report_of(handed_in)
     assert float(alice["own_agent_report"]) == points["own_agent_report"]
@@ -409,8 +413,6 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, 
     assert "Every check passed." in (feedback / "alice.md").read_text()
     sheet = (feedback / "bob.md").read_text()
     assert f"**Total: {float(bob['total']):g} / {sum(points.values()):g} points.**" in sheet
-    assert "| `count_not_worse` | 0 / 3 | failed |" in sheet
-    assert "### `count_not_worse`" in sheet and "count the verdicts" in sheet
     assert "### `own_agent_report`" in sheet and "no report.json" in sheet
     assert "1 word: this answer needs at least 10 words" in sheet
     assert "no answer written" in sheet  # analysis_comparison
@@ -467,11 +469,15 @@ def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path,
     assert time.perf_counter() - started < 240, f"{path.name} is too slow on the fast budget"
 
 
+# Exercises graded from files handed in beside the notebooks, not from their cells
+HANDED_IN_ITEMS = ("own_agent_report", "pendulum_agent")
+
 # Exercises whose solution calls earlier answers of its notebook: graded right only with them
 USES_EARLIER = {"Critic": ("build_mlp",),
                 "sweep_offsets_inside": ("level_moves",),
                 "td3_target": ("smoothed_target_action",),
-                "td3_update": ("td3_target", "smoothed_target_action")}
+                "td3_update": ("td3_target", "smoothed_target_action"),
+                "table_verdict": ("wilson_interval",)}
 
 
 def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
@@ -524,8 +530,9 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
                 got = 0
                 if choice in (1, 2):
                     cell["source"] = solved[exercise].splitlines(keepends=True)
-                    # own_agent_report is graded from lesson 13's hand-in, which no one makes
-                    got = 0 if exercise == "own_agent_report" else points[exercise]
+                    # graded from what is handed in beside the notebooks (lesson 13's
+                    # folder, lesson 04's Pendulum actor), which no one here hands in
+                    got = 0 if exercise in HANDED_IN_ITEMS else points[exercise]
                 elif choice == 3:
                     old, new = MUTANTS[exercise][0][1:3]
                     cell["source"] = mutate(solved[exercise], old, new).splitlines(keepends=True)

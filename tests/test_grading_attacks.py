@@ -214,7 +214,7 @@ def attacked_submission(folder: Path, canary: Path) -> None:
         notebooks.write_notebook(nb, folder / path.name)
 
 
-def grade_attacked(root: Path) -> dict:
+def grade_attacked(root: Path, pendulum_actor: Path) -> dict:
     """Grade a student whose cells attack the grader (in ``root``); the report, with the
     grader's output and the canary that no attack may write."""
     canary = root / "outside" / "canary.txt"
@@ -235,6 +235,11 @@ def grade_attacked(root: Path) -> dict:
     write_submission(run, root / "student" / SUBMISSION_DIR)
     data = root / "installation" / "data"
     shutil.copytree(DATA_DIR, data, ignore=shutil.ignore_patterns("nodes2"))
+    # Likewise lesson 04's Pendulum actor, graded from its file (pendulum_agent): trained by
+    # lesson 04's training with the library's pieces (tests/conftest.py).
+    from dlo_course.pendulum import ACTOR_FILE
+
+    shutil.copyfile(pendulum_actor, root / "student" / ACTOR_FILE)
     out = root / "grades.json"
     env = dict(os.environ, DLO_COURSE_GRADING_TIMEOUT="8", DLO_COURSE_GRADING_MEMORY_MB="1024",
                DLO_COURSE_DATA=str(data))
@@ -248,7 +253,7 @@ def grade_attacked(root: Path) -> dict:
 
 
 @pytest.fixture(scope="session")
-def attacked(tmp_path_factory):
+def attacked(tmp_path_factory, request):
     """The attacked student's grades, made once for the whole run: under pytest-xdist every
     worker that runs one of these tests would grade it again (70 s each; the loadgroup
     scheduler does not keep this module's tests together with pytest 9), so the workers
@@ -263,7 +268,8 @@ def attacked(tmp_path_factory):
         if kept.is_file():
             report = json.loads(kept.read_text())
         else:
-            report = grade_attacked(shared / "attacks")
+            report = grade_attacked(shared / "attacks",
+                                    request.getfixturevalue("trained_pendulum_actor"))
             kept.write_text(json.dumps(report))
     report["canary"] = Path(report["canary"])
     return report
@@ -427,9 +433,20 @@ def exercise_cells(folder: Path):
             yield book, name, source
 
 
+# Exercises graded from a file the cell writes, not from its code: the grader never loads the
+# cell (no delegation check), and pendulum_agent's solution calls the library's training loop
+# with the student's own pieces (lesson 04, section 6).
+GRADED_FROM_FILES = {"pendulum_agent"}
+
+
 def test_no_solution_is_taken_for_a_delegation():
     for book, name, source in exercise_cells(SOLUTIONS):
-        assert delegation_problems(source, book.setup_sources) == [], name
+        if name not in GRADED_FROM_FILES:
+            assert delegation_problems(source, book.setup_sources) == [], name
+    from dlo_course.grading.notebooks import exercises
+
+    graded = {e["exercise"] for e in exercises(SOLUTIONS)}
+    assert GRADED_FROM_FILES <= graded
 
 
 SETUP = "import numpy as np\nfrom dlo_course import ddpg\nfrom dlo_course.replay_buffer import " \

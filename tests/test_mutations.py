@@ -21,6 +21,7 @@ import pytest
 
 from dlo_course.grading import notebooks
 from dlo_course.grading.grade import grading_command
+from test_rubric import WRONG_ANSWERS  # long answers that miss a criterion of their rubric
 
 REPO = Path(__file__).resolve().parents[1]
 SOLUTIONS = REPO / "solutions"
@@ -59,7 +60,9 @@ MUTANTS: dict[str, list[tuple]] = {
         ("value of the current state", "np.max(q, axis=1)[next_state]", "np.max(q, axis=1)[:, None]")],
     "prediction_seeds": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
-        ("too short", WHOLE_ANSWER, "They will overlap, I think.")],
+        ("too short", WHOLE_ANSWER, "They will overlap, I think."),
+        ("an outcome, long, with no reason from the interval's width", WHOLE_ANSWER,
+         WRONG_ANSWERS["prediction_seeds"][0], 0.5)],
     "prediction_sweeps": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "Five sweeps, I think.")],
@@ -121,6 +124,9 @@ MUTANTS: dict[str, list[tuple]] = {
          "loss_pi = agent.critic(obs, agent.actor(obs)).mean()"),
         ("policy loss summed, not averaged", "loss_pi = -agent.critic(obs, agent.actor(obs)).mean()",
          "loss_pi = -agent.critic(obs, agent.actor(obs)).sum()")],
+    "pendulum_agent": [  # graded from the actor file beside the notebook, which these lack
+        ("trains no step", "steps=steps, seed=seed", "steps=0, seed=seed"),
+        ("saves nothing", "        ddpg.save_network(agent.actor, path)\n", "        pass\n")],
     "prediction_actor": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "0.5 and 1.")],
@@ -224,22 +230,14 @@ MUTANTS: dict[str, list[tuple]] = {
          "z * math.sqrt(p * (1 - p) / n)")],
     "prediction_verdicts": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
-        ("too short", WHOLE_ANSWER, "In all six cells.")],
-    "steps_per_action": [
-        ("rounds up", "round(action_duration / time_step)", "-(-action_duration // time_step)"),
-        ("no minimum of one", "max(1, round(action_duration / time_step))", "round(action_duration / time_step)")],
+        ("too short", WHOLE_ANSWER, "In all six cells."),
+        ("a count, long, with no reason that names what decides a verdict", WHOLE_ANSWER,
+         WRONG_ANSWERS["prediction_verdicts"][0], 0.5)],
     "adam_step": [
         ("no bias correction", "m_hat = m / (1 - beta1**t)", "m_hat = m"),
         ("eps inside the square root", "(np.sqrt(v_hat) + eps)", "np.sqrt(v_hat + eps)"),
         ("swapped betas", "m = beta1 * np.asarray(m) + (1 - beta1) * grad",
          "m = beta2 * np.asarray(m) + (1 - beta2) * grad")],
-    "future_goal_steps": [
-        ("goal steps up to T included", "rng.integers(steps, episode_length)",
-         "rng.integers(steps, episode_length + 1)"),
-        ("goal steps from the whole episode", "rng.integers(steps, episode_length)",
-         "rng.integers(0, episode_length, size=len(steps))"),
-        ("strictly later goal steps", "rng.integers(steps, episode_length)",
-         "rng.integers(np.minimum(steps + 1, episode_length - 1), episode_length)")],
     "relabel": [
         ("reward of the wrong sign", '"rew": (-distance)', '"rew": (distance)'),
         ("goal taken from obs, not next_obs", "goals = achieved_next[goal_steps]",
@@ -249,7 +247,9 @@ MUTANTS: dict[str, list[tuple]] = {
         ("squared distances", "np.linalg.norm(diff, axis=-1)", "np.sum(diff ** 2, axis=-1)")],
     "prediction_successes": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
-        ("too short", WHOLE_ANSWER, "About ten percent.")],
+        ("too short", WHOLE_ANSWER, "About ten percent."),
+        ("a share, long, with no reason why a copy succeeds", WHOLE_ANSWER,
+         WRONG_ANSWERS["prediction_successes"][0], 0.5)],
     "jacobian_from_probes": [
         ("J transposed", "    return transposed.T\n", "    return transposed\n"),
         ("each probe taken as one axis (finite differences of the diagonal only)",
@@ -273,12 +273,6 @@ MUTANTS: dict[str, list[tuple]] = {
         ("no check of the damping (secondary requirement only)",
          "    if damping < 0:\n        raise ValueError(f\"damping must be >= 0, got {damping}\")\n",
          "", 1.5)],
-    "count_not_worse": [
-        ("counts only the cells it cannot tell apart", '!= "below"', '== "within"'),
-        ("counts the cells where ours is worse", '!= "below"', '== "below"'),
-        ("the interval's high end left out of it", "if paper > high", "if paper >= high"),
-        ("names read from the paper's side", '"above" if paper < low else "below" if paper > high',
-         '"below" if paper < low else "above" if paper > high')],
     "own_agent_report": [
         ("hands in the shipped agent", "hand_in(agent, folder)", "hand_in(SHIPPED_AGENT, folder)"),
         ("hands in nothing", "return hand_in(agent, folder)", "return {}")],
@@ -351,33 +345,40 @@ MUTANTS: dict[str, list[tuple]] = {
          "I would rather wait for the benchmark to tell me what happens in each of the worlds.")],
     "prediction_cells": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
-        ("too short", WHOLE_ANSWER, "About six cells.")],
+        ("too short", WHOLE_ANSWER, "About six cells."),
+        ("a number, long, with no reason from the agents, goals or episodes", WHOLE_ANSWER,
+         WRONG_ANSWERS["prediction_cells"][1], 0.5)],
     "prediction_factor": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
-        ("too short", WHOLE_ANSWER, "The threshold.")],
+        ("too short", WHOLE_ANSWER, "The threshold."),
+        ("a factor, long, with no mechanism", WHOLE_ANSWER,
+         WRONG_ANSWERS["prediction_factor"][1], 0.5)],
     "analysis_comparison": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "Ours are worse than the paper's in most cells, because "
-         "they were trained on far fewer transitions.")],
+         "they were trained on far fewer transitions."),
+        ("long, with no source, numbers, intervals or cells", WHOLE_ANSWER,
+         WRONG_ANSWERS["analysis_comparison"][0])],
     "analysis_next_step": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
-        ("empty", WHOLE_ANSWER, "")],
-    "mean_interval": [
-        ("population standard deviation", "float(values.std(ddof=1))", "float(values.std())"),
-        ("normal quantile for t", "T_975[n - 1]", "1.96"),
-        ("divides by n, not sqrt(n)", "/ np.sqrt(n)", "/ n")],
-    "mean_curve_with_band": [
-        ("population standard deviation", "curves.std(axis=0, ddof=1)", "curves.std(axis=0)"),
-        ("t with n degrees of freedom", "T_975[n - 1]", "T_975.get(n, 1.96)"),
-        ("band over the points, not the seeds", "curves.std(axis=0, ddof=1)",
-         "curves.std(ddof=1)")],
-    "recipes_differ": [
-        ("says they differ when the intervals overlap",
-         "return bool(high_a < low_b or high_b < low_a)",
-         "return bool(high_a >= low_b and high_b >= low_a)"),
-        ("normal quantile for t", "T_975[n - 1]", "1.96"),
-        ("one standard deviation, not the interval",
-         "half = T_975[n - 1] * values.std(ddof=1) / np.sqrt(n)", "half = values.std(ddof=1)")],
+        ("empty", WHOLE_ANSWER, ""),
+        ("long, an experiment unrelated to the evidence", WHOLE_ANSWER,
+         WRONG_ANSWERS["analysis_next_step"][0])],
+    "seed_interval": [
+        ("population standard deviation", "values.std(axis=axis, ddof=1)", "values.std(axis=axis)"),
+        ("normal quantile for t", "half = T_975[n - 1] *", "half = 1.96 *"),
+        ("divides by n, not sqrt(n)", "/ np.sqrt(n)", "/ n"),
+        ("spread over every number, not over the seeds", "values.std(axis=axis, ddof=1)",
+         "values.std(ddof=1)"),
+        ("no check of the number of seeds", "    if n - 1 not in T_975:\n        raise ValueError("
+         "f\"a t-interval needs 2 to {max(T_975) + 1} runs, got {n}\")\n", "")],
+    "table_verdict": [
+        ("names read from the paper's side", 'return "above"\n    if paper_done_percent > high:\n        return "below"',
+         'return "below"\n    if paper_done_percent > high:\n        return "above"'),
+        ("the interval's ends left out of it", "if paper_done_percent < low:",
+         "if paper_done_percent <= low:"),
+        ("fractions against a percent", "(100 * x for x in wilson_interval(successes, episodes))",
+         "wilson_interval(successes, episodes)")],
 }
 def notebook_exercises() -> dict[str, list[str]]:
     """Solution notebook stem -> its exercises, in order."""

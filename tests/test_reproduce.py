@@ -55,6 +55,18 @@ def test_verdicts_against_the_papers_done_percent():
     assert verdict(row, 80.0) == "above"
 
 
+def test_done_verdict_takes_the_wilson_interval_in_percent():
+    from dlo_course.evaluation import wilson_interval
+    from dlo_course.reproduce import done_verdict
+
+    low, high = (100 * x for x in wilson_interval(87, 100))  # 79.0 to 92.2
+    assert done_verdict(87, 100, low - 0.1) == "above"      # the paper below our interval
+    assert done_verdict(87, 100, low) == done_verdict(87, 100, high) == "within"  # ends in it
+    assert done_verdict(87, 100, high + 0.1) == "below"
+    assert done_verdict(0, 20, 0.0) == done_verdict(20, 20, 100.0) == "within"
+    assert done_verdict(20, 20, 99.0) == "within" and done_verdict(1000, 1000, 99.0) == "above"
+
+
 def test_goal_sources_of_the_two_protocols():
     from dlo_course.reproduce import goal_source
 

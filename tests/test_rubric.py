@@ -301,3 +301,110 @@ def test_a_student_cannot_lower_the_least_number_of_words(tmp_path):
     assert out.is_file(), proc.stdout[-3000:] + proc.stderr[-3000:]
     entry = {e["exercise"]: e for e in json.loads(out.read_text())["exercises"]}["prediction_sweeps"]
     assert entry["earned"] == 0 and "at least 10 words" in entry["message"]
+
+
+# ------------------------------------------------------------------ lessons 10 to 13 (issue 38)
+# Each criterion names the concept the answer must contain, so that a long answer without it
+# loses the point: below, for each written answer of lessons 10-13, wrong answers long enough
+# to count (each with a count or an outcome, and "because", "so" or "which" that the old
+# patterns took for a reason) that must miss a criterion, and short right answers that must
+# meet them all. The rubrics are read from the solutions' metadata, as the grader reads them.
+
+WRONG_ANSWERS = {
+ "prediction_verdicts": [
+   "I think about three of them, because the robot is quite good and I like how it moves, so it should do fine overall.",
+   "Our agent is significantly below the paper in most cells because the paper is better, as it was published in a good conference so it must be right.",
+   "I predict that the robot will be better than the paper because the deep learning is powerful and modern, which is why it should win.",
+ ],
+ "prediction_seeds": [
+   "The intervals will overlap because DDPG and TD3 are both good algorithms, so neither is better, which I think is the usual outcome.",
+   "TD3 will be higher, since it is newer and newer methods are better; I am confident about this result in the end.",
+   "They will be apart because the computer is fast and the pendulum is a simple task which any method solves quickly.",
+ ],
+ "prediction_successes": [
+   "About ten percent of them, because relabelling is good and the agent learns faster which helps the training a lot overall.",
+   "Most of the copies will succeed because hindsight experience replay is a powerful method that always works in practice.",
+   "I think the relabelled copies succeed since the robot is well trained and the simulation is accurate, so it works well.",
+ ],
+ "prediction_cells": [
+   "I think the answer is that most results are fine because the robot is good and deep learning works, so things go well.",
+   "Twelve, because the method is powerful and I think it is a good guess, as most things go right about half the time.",
+   "The paper will win because it is a published paper and the authors know what they are doing, so we will lose.",
+ ],
+ "prediction_factor": [
+   "The number of nodes matters most because it is the most important thing in general, as everyone knows about that.",
+   "I think the threshold is the main factor since it seems to me like the most important factor among the four listed here.",
+   "The robot will do badly because deep reinforcement learning is hard and the simulation is slow, which makes everything harder.",
+ ],
+ "analysis_comparison": [
+   ("Our agents are good and the paper's agents are also good. The comparison shows that both work well and that deep "
+    "reinforcement learning is a powerful method for deformable objects. I think the results are convincing and the "
+    "reproduction is successful overall, because the numbers look similar and the plots look nice. The robot moves the "
+    "rod well in most cases and sometimes fails, which is normal for learning methods in robotics today."),
+   ("The shipped agents do worse than the paper. The paper is better because they trained more and had more computers. "
+    "We used fewer computers so our results are lower in general and the paper wins in most of the table, which is what "
+    "I expected from the beginning. This is a common result in reproductions and it does not surprise me much at all "
+    "since the authors had much more time and effort to put into their method."),
+ ],
+ "analysis_next_step": [
+   ("I would change the reward function to be more interesting because it would make the robot smarter and better at the "
+    "task, which is what we want in the end, so that is my proposal for the next step of this work."),
+   ("The next step is to use a bigger neural network with more layers and a different activation function because deep "
+    "learning always improves with bigger models, so the robot would become much better at shaping the rod."),
+ ],
+}
+RIGHT_ANSWERS = {
+ "prediction_verdicts": ["Two cells, because with 100 episodes the intervals are about ten points wide and the paper is near 100% in the easy cells."],
+ "prediction_seeds": ["They will overlap: with only three seeds the t-quantile is 4.3, so the intervals are very wide."],
+ "prediction_successes": ["About 30% of the copies, since the t' = t copies always succeed and the rod moves little between steps."],
+ "prediction_cells": ["18 of the 24 cells, because 100 episodes give wide intervals and the paper is low at 0.03 m."],
+ "prediction_factor": ["The database, because the large box holds goals outside the training box, which our short training never saw."],
+ "analysis_comparison": [("The shipped recipe agents, evaluated on the paper's test goals with 100 episodes per cell, are not "
+    "significantly worse than the paper in 19 of 24 cells. Their intervals are about ten points wide, so within does not "
+    "mean equal. They fall short on the large database at 0.05 m with reinitialisation, goals outside the training box, "
+    "while at 0.03 m they are often above the paper's own low numbers. My own 2-node agent reached 40% over 20 episodes.")],
+ "analysis_next_step": [("Train the 4-node agent longer, with more transitions on more ranks, because the large database cells "
+    "are still short of the paper and the current budget is a few per cent of the paper's; then evaluate 1000 episodes.")],
+}
+
+RUBRIC_LESSONS = {"prediction_verdicts": "10_generalisation",
+                  "prediction_seeds": "11_reproducibility",
+                  "prediction_successes": "12_hindsight_relabelling",
+                  "prediction_cells": "13_capstone_table_one",
+                  "prediction_factor": "13_capstone_table_one",
+                  "analysis_comparison": "13_capstone_table_one",
+                  "analysis_next_step": "13_capstone_table_one"}
+
+
+def course_answer(name):
+    stem = RUBRIC_LESSONS[name]
+    return notebooks.written_answers(notebooks.SOLUTIONS_DIR / f"{stem}.ipynb")[name]
+
+
+def test_every_written_answer_of_lessons_10_to_13_has_wrong_answers_here():
+    for stem in sorted(set(RUBRIC_LESSONS.values())):
+        names = set(notebooks.written_answers(notebooks.SOLUTIONS_DIR / f"{stem}.ipynb"))
+        assert names <= set(WRONG_ANSWERS) and names <= set(RIGHT_ANSWERS), (stem, names)
+
+
+@pytest.mark.parametrize("name, answer", [(n, a) for n, answers in WRONG_ANSWERS.items()
+                                          for a in answers],
+                         ids=[f"{n}-{i}" for n, answers in WRONG_ANSWERS.items()
+                              for i in range(len(answers))])
+def test_a_long_wrong_answer_loses_the_point(name, answer):
+    info = course_answer(name)
+    assert len(answer.split()) >= info["min_words"], "the wrong answer must be long enough"
+    met = notebooks.rubric_met(answer, info["rubric"])
+    assert not all(met), f"{name}: a wrong answer meets every criterion: {answer!r}"
+    assert notebooks.written_answer_score(answer, info["min_words"], info["rubric"]) < 1
+
+
+@pytest.mark.parametrize("name, answer", [(n, a) for n, answers in RIGHT_ANSWERS.items()
+                                          for a in answers],
+                         ids=list(RIGHT_ANSWERS))
+def test_a_right_answer_in_other_words_meets_every_criterion(name, answer):
+    info = course_answer(name)
+    assert len(answer.split()) >= info["min_words"]
+    met = notebooks.rubric_met(answer, info["rubric"])
+    unmet = [item["criterion"] for item, ok in zip(info["rubric"], met) if not ok]
+    assert not unmet, f"{name}: {unmet}"

@@ -511,3 +511,44 @@ def test_validation_goals_hold_out_the_papers_test_goals():
             validation_indices(env, dataclasses.replace(config, validation_goals=10_000))
     finally:
         env.close()
+
+
+# --- the student's episode function (lesson 09) trains the agent ---
+
+def solution_play_episode():
+    from dlo_course import pendulum
+    from dlo_course.paths import REPO_ROOT
+
+    return pendulum.earlier_answer("09_training_ddpg_on_the_dlo", "play_episode",
+                                   REPO_ROOT / "solutions")
+
+
+def test_the_solutions_play_episode_trains_as_the_library(tmp_path):
+    """One agent, episodes that end at the goal, no hindsight copies: the run that lesson
+    09's solution plays is the library's, bit for bit; with copies it stores them too."""
+    play = solution_play_episode()
+    settings = dict(env_id="test/ReachShape-v0", steps_per_episode=10, stop_at_goal=True,
+                    updates_per_step=2, ddpg=DDPGConfig(hidden_sizes=(32, 32), batch_size=8,
+                                                        buffer_size=500))
+    library = train(tiny(tmp_path, "library", **settings), progress=False)
+    student = train(tiny(tmp_path, "student", **settings), progress=False, play_episode=play)
+    assert read_rows(student) == read_rows(library)
+    assert same_weights(student, library)
+
+    relabelled = train(tiny(tmp_path, "her", her_k=2, **settings), progress=False,
+                       play_episode=play)
+    rows = read_rows(relabelled)
+    assert not same_weights(relabelled, library)
+    assert all(r["critic_loss"] != "" for r in rows[1:])  # it learned from a full buffer
+
+
+def test_an_episode_function_needs_one_agent_stopping_at_the_goal(tmp_path):
+    play = solution_play_episode()
+    with pytest.raises(ValueError, match="stop_at_goal=True"):
+        train(tiny(tmp_path, stop_at_goal=False), progress=False, play_episode=play)
+
+    def liar(*args, **kwargs):
+        return {**play(*args, **kwargs), "updates": 0}
+
+    with pytest.raises(ValueError, match="it called update"):
+        train(tiny(tmp_path, "liar", stop_at_goal=True), progress=False, play_episode=liar)

@@ -247,3 +247,44 @@ def test_ddpg_update(student):
 @pytest.mark.exercise("prediction_actor", points=1)
 def test_prediction_actor(written_answer):
     written_answer.check()
+
+
+# ------------------------------------------------------------------ the Pendulum agent
+
+# One re-evaluation: 10 episodes of 200 steps of a small actor, about a second of CPU; its
+# own limit, with room for a busy machine.
+REEVALUATION_TIMEOUT = 120.0
+
+
+def probe_pendulum(_, actor_bytes):
+    """In a sandbox worker that runs none of the student's code: the handed-in actor file
+    (loaded with weights_only=True) played again on the graded episodes."""
+    from pathlib import Path
+
+    from dlo_course.pendulum import evaluate_actor_file
+
+    path = Path("handed_in_pendulum_actor.pt")  # in the worker's scratch folder
+    path.write_bytes(actor_bytes)
+    return evaluate_actor_file(path)
+
+
+@pytest.mark.timeout(REEVALUATION_TIMEOUT + 120)
+@pytest.mark.exercise("pendulum_agent", points=2)
+def test_pendulum_agent(notebook_folder, data_probe):
+    """The points come from what the handed-in actor does, measured here: its mean return on
+    the graded episodes must beat the floor, which no untrained actor reaches."""
+    from dlo_course.pendulum import ACTOR_FILE, MAX_ACTOR_BYTES, RETURN_FLOOR
+
+    path = notebook_folder / ACTOR_FILE
+    if not path.is_file():
+        pytest.fail(f"pendulum_agent: no {ACTOR_FILE} beside the notebook: run section 6 "
+                    f"with your lessons 2 and 3 beside it, and hand the file in with the "
+                    f"notebook", pytrace=False)
+    if path.stat().st_size > MAX_ACTOR_BYTES:
+        pytest.fail(f"pendulum_agent: {ACTOR_FILE} is larger than {MAX_ACTOR_BYTES} bytes",
+                    pytrace=False)
+    result = data_probe(probe_pendulum, path.read_bytes(), timeout=REEVALUATION_TIMEOUT)
+    assert result["passed"], (
+        f"pendulum_agent: your actor's mean return on the graded episodes is "
+        f"{result['mean_return']:.0f}, not above the floor {RETURN_FLOOR:.0f} (an untrained "
+        f"actor gets about -1100): see 'If your actor does not learn' in section 6")

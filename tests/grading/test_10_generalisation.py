@@ -1,9 +1,11 @@
-"""Grading: lesson 10, generalisation (reference: dlo_course.evaluation)."""
+"""Grading: lesson 10, generalisation (reference: dlo_course.evaluation; the verdict:
+dlo_course.reproduce.done_verdict)."""
 
 import numpy as np
 import pytest
 
 from dlo_course.evaluation import EpisodeRecord, summarize, wilson_interval
+from dlo_course.reproduce import done_verdict
 
 pytestmark = pytest.mark.notebook("10_generalisation")
 
@@ -76,6 +78,43 @@ def test_wilson_interval(student):
     assert got["z"] == pytest.approx(wilson_interval(7, 20, z=2.576))
     for bad, raised in zip(WILSON_BAD, got["raised"], strict=True):
         assert raised == "ValueError", f"wilson_interval{bad} must raise ValueError ({raised})"
+
+
+# (successes, episodes, paper's done %): 4 verdicts "above", 5 "within" (2 of them on an end of
+# the interval: 0 of 20 against 0%, 20 of 20 against 100%) and 6 "below"; naming the verdicts
+# from the paper's side, leaving the ends out of the interval or comparing percent with
+# fractions each changes some of them.
+VERDICT_CASES = [(100, 100, 90.0), (87, 100, 73.4), (8, 20, 10.0), (1000, 1000, 99.0),
+                 (100, 100, 99.5), (81, 100, 80.2), (1, 20, 21.1), (0, 20, 0.0),
+                 (20, 20, 100.0), (87, 100, 99.8), (57, 100, 88.7), (8, 20, 99.5),
+                 (0, 20, 73.4), (2, 20, 46.8), (7, 20, 99.8)]
+
+
+def verdict_cases():
+    """The fixed cases, then fresh ones. (No fresh paper value sits on an end of the interval:
+    a correct Wilson interval computed in another order may differ there in the last bit.)"""
+    rng = np.random.default_rng()  # fresh cases at every grading
+    drawn = []
+    for _ in range(30):
+        n = int(rng.integers(1, 1500))
+        drawn.append((int(rng.integers(0, n + 1)), n, float(rng.uniform(0, 100))))
+    return VERDICT_CASES + drawn
+
+
+def probe_table_verdict(fn, cases):
+    return [str(fn(k, n, paper)) for k, n, paper in cases]
+
+
+@pytest.mark.exercise("table_verdict", points=2, reference="dlo_course.reproduce.done_verdict")
+def test_table_verdict(student):
+    fixed = [done_verdict(*case) for case in VERDICT_CASES]
+    assert [fixed.count(v) for v in ("above", "within", "below")] == [4, 5, 6]  # the test's data
+    cases = verdict_cases()
+    got = student.run(probe_table_verdict, cases)
+    for case, value in zip(cases, got, strict=True):
+        assert value == done_verdict(*case), (
+            f"table_verdict{case} = {value!r}, expected {done_verdict(*case)!r}: \"above\" when "
+            f"the paper's done % is below our interval (in percent, its ends included)")
 
 
 # ------------------------------------------------------------------ written answers

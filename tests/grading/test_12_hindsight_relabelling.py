@@ -1,17 +1,11 @@
 """Grading: lesson 12, hindsight relabelling (reference: dlo_course.her).
 
 ``relabel`` is compared with the library on fixed inputs (it is given its steps and goal
-steps, so its answer is deterministic). ``future_goal_steps``
-draws at random, so any correct sampler must pass, whatever generator calls it makes: its
-draws are checked for shape, range, reproducibility and uniformity. The uniformity bands are
-calibrated: a correct uniform sampler fails the whole test with a probability below 1e-6
-(:func:`false_failure_bound` gives about 1e-9), whatever generator calls it makes.
+steps, so its answer is deterministic).
 
 Every input and output crossing to the student's code is plain data (arrays, ints, floats):
 the probes below run in the grading sandbox, the checks here.
 """
-
-import math
 
 import numpy as np
 import pytest
@@ -21,114 +15,6 @@ from dlo_course import her
 pytestmark = pytest.mark.notebook("12_hindsight_relabelling")
 
 FIELDS = ("obs", "act", "rew", "next_obs", "done")
-
-
-# -------------------------------------------------------------- future_goal_steps
-
-SHAPE_CASES = [(1, 1), (1, 5), (4, 1), (7, 3), (60, 4)]  # (episode_length T, k)
-SEED_T, SEED_K = 10, 4  # the reproducibility check
-UNIFORM_T, UNIFORM_K = 6, 50_000  # the uniformity check: 50 000 goal steps per step t
-UNIFORM_SIGMAS = 7.0  # band of each count: +- 7 binomial standard deviations
-
-
-def probe_future_goal_steps(fn):
-    """The student's draws: several shapes, the same and another seed, a large sample."""
-    def draw(T, k, seed):
-        steps, goal_steps = fn(T, k, np.random.default_rng(seed))
-        return {"steps": np.asarray(steps), "goal_steps": np.asarray(goal_steps)}
-
-    shapes = [draw(T, k, 1000 * T + k) for T, k in SHAPE_CASES]
-    np.random.seed(123)  # the global generator must not matter
-    first = draw(SEED_T, SEED_K, 7)
-    np.random.seed(456)
-    again, other = draw(SEED_T, SEED_K, 7), draw(SEED_T, SEED_K, 8)
-    return {"shapes": shapes, "seeds": [first, again, other],
-            "uniform": draw(UNIFORM_T, UNIFORM_K, 2022)}
-
-
-def check_draw(draw, T, k):
-    """Shape, integer type, each step k times, and 0 <= t <= t' < T for every pair."""
-    steps, goal_steps = draw["steps"], draw["goal_steps"]
-    where = f"T = {T}, k = {k}"
-    for name, value in (("steps", steps), ("goal_steps", goal_steps)):
-        assert value.shape == (T * k,), f"{where}: {name} of shape {value.shape}, " \
-                                        f"expected {(T * k,)}"
-        assert value.dtype.kind in "iu", f"{where}: {name} of dtype {value.dtype}, " \
-                                         "expected integers"
-    # the order of the pairs is free: compare the steps as a multiset
-    np.testing.assert_array_equal(np.sort(steps), np.repeat(np.arange(T), k),
-                                  err_msg=f"{where}: every step t must appear k times")
-    assert np.all(goal_steps >= steps), f"{where}: a goal step t' before its step t"
-    assert np.all(goal_steps < T), f"{where}: a goal step t' >= T (outside the episode)"
-
-
-def pairs(draw):
-    """The (t, t') pairs of a draw, in a canonical order."""
-    return sorted(zip(draw["steps"].tolist(), draw["goal_steps"].tolist()))
-
-
-def uniform_bands(T, k):
-    """For each step t and goal step t' in [t, T): the expected count k / (T - t) and the
-    half-width of the band a correct sampler's count must fall in."""
-    bands = {}
-    for t in range(T - 1):  # t = T - 1 has one possible goal step: checked by the ranges
-        p = 1.0 / (T - t)
-        sigma = math.sqrt(k * p * (1 - p))
-        for t_goal in range(t, T):
-            bands[t, t_goal] = (k * p, UNIFORM_SIGMAS * sigma)
-    return bands
-
-
-@pytest.mark.exercise("future_goal_steps", points=1,
-                      reference="dlo_course.her.future_goal_steps")
-def test_future_goal_steps(student):
-    got = student.run(probe_future_goal_steps)
-    for draw, (T, k) in zip(got["shapes"], SHAPE_CASES, strict=True):
-        check_draw(draw, T, k)
-    first, again, other = got["seeds"]
-    for draw in (first, again, other):
-        check_draw(draw, SEED_T, SEED_K)
-    for name in ("steps", "goal_steps"):
-        np.testing.assert_array_equal(first[name], again[name], err_msg=(
-            "the same generator seed must give the same draws, whatever the global NumPy "
-            "generator does: draw from the rng argument"))
-    assert pairs(first) != pairs(other), "another generator seed must give other draws"
-    draw = got["uniform"]
-    check_draw(draw, UNIFORM_T, UNIFORM_K)
-    steps, goal_steps = draw["steps"], draw["goal_steps"]
-    for (t, t_goal), (expected, band) in uniform_bands(UNIFORM_T, UNIFORM_K).items():
-        count = int(np.sum((steps == t) & (goal_steps == t_goal)))
-        assert abs(count - expected) < band, (
-            f"step t = {t} of T = {UNIFORM_T}: goal step {t_goal} drawn {count} times in "
-            f"{UNIFORM_K}, expected {expected:.0f} +- {band:.0f}: t' must be uniform in [t, T)")
-
-
-def _chernoff_tail(n, p, q):
-    """Upper bound of P(X >= n q) for q > p (or of P(X <= n q) for q < p), X ~ Bin(n, p):
-    exp(-n KL(q || p)) (Chernoff-Hoeffding)."""
-    if q <= 0.0 or q >= 1.0:
-        return (1 - p) ** n if q <= 0.0 else p ** n
-    kl = q * math.log(q / p) + (1 - q) * math.log((1 - q) / (1 - p))
-    return math.exp(-n * kl)
-
-
-def false_failure_bound():
-    """An upper bound on the probability that a correct, uniform, seeded sampler fails
-    :func:`test_future_goal_steps` (union bound over every random check)."""
-    bound = 0.0
-    for (t, _), (expected, band) in uniform_bands(UNIFORM_T, UNIFORM_K).items():
-        n, p = UNIFORM_K, 1.0 / (UNIFORM_T - t)
-        bound += _chernoff_tail(n, p, (expected + band) / n)  # count >= expected + band
-        bound += _chernoff_tail(n, p, (expected - band) / n)  # count <= expected - band
-    # two seeds drawing the same pairs: the pairs are compared as a multiset, i.e. for each
-    # step t the multiset of its k goal steps, drawn from c = T - t values. Two independent
-    # multisets are equal with probability sum_M P(M)^2 <= max_M P(M) <= k! / c^k.
-    same = 1.0
-    for t in range(SEED_T):
-        c = SEED_T - t
-        same *= min(1.0, math.factorial(SEED_K) / c ** SEED_K)
-    bound += same
-    return bound
 
 
 # ------------------------------------------------------------------------ relabel

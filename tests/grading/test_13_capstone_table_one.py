@@ -1,10 +1,7 @@
-"""Grading: lesson 13, the capstone on Table I (reference: dlo_course.reproduce.verdict; the
-student's own agent: dlo_course.submission).
+"""Grading: lesson 13, the capstone on Table I (the student's own agent: dlo_course.submission;
+the verdict on each cell is lesson 10's ``table_verdict``, graded there).
 
-``count_not_worse`` is compared with a count made here from the library's verdicts (the
-interval from the notebook's setup cell, the library's Wilson interval in percent), on rows
-where counting the wrong verdicts, or leaving the interval's ends out of it, gives another
-number. ``own_agent_report`` reads the folder handed in beside the notebook
+``own_agent_report`` reads the folder handed in beside the notebook
 (``13_submission/``: an actor file and the report of the graded protocol), evaluates that
 actor again in a sandbox worker that runs none of the student's code, and gives the points
 only if the report says what the actor does (:func:`dlo_course.submission.report_problems`).
@@ -16,58 +13,7 @@ The probes below run in the grading sandbox, the checks here.
 
 import pytest
 
-from dlo_course.evaluation import wilson_interval
-from dlo_course.reproduce import verdict
-
 pytestmark = pytest.mark.notebook("13_capstone_table_one")
-
-
-def library_interval(done_percent, episodes, z=1.959964):
-    successes = round(done_percent * episodes / 100)
-    return tuple(100 * x for x in wilson_interval(successes, episodes, z=z))
-
-
-def count_rows():
-    """Table-like rows with 4 verdicts "above", 5 "within" (2 of them on an end of the
-    interval) and 6 "below"."""
-    rows = []
-    for p, n, paper in [(100.0, 100, 90.0), (87.0, 100, 73.4), (40.0, 20, 10.0),
-                        (100.0, 1000, 99.0),                                  # above
-                        (100.0, 100, 99.5), (81.0, 100, 80.2), (5.0, 20, 21.1),
-                        (0.0, 20, 0.0), (100.0, 20, 100.0),                   # within
-                        (87.0, 100, 99.8), (57.0, 100, 88.7), (40.0, 20, 99.5),
-                        (0.0, 20, 73.4), (10.0, 20, 46.8), (35.0, 20, 99.8)]:  # below
-        rows.append({"done_percent": p, "episodes": n, "paper_done_percent": paper})
-    return rows
-
-
-def check_verdicts(rows):
-    """The library's verdict of each row, its interval computed from done % and episodes."""
-    found = []
-    for row in rows:
-        low, high = library_interval(row["done_percent"], row["episodes"])
-        found.append(verdict({"done_ci_low": low, "done_ci_high": high},
-                             row["paper_done_percent"]))
-    return found
-
-
-def probe_count_not_worse(fn, rows):
-    everything = fn([dict(row) for row in rows])
-    every_other = fn([dict(row) for row in rows[::2]])
-    nothing = fn([])
-    return [int(everything), int(every_other), int(nothing)]
-
-
-@pytest.mark.exercise("count_not_worse", points=3, reference="dlo_course.reproduce.verdict")
-def test_count_not_worse(student):
-    rows = count_rows()
-    found = check_verdicts(rows)
-    assert [found.count(v) for v in ("above", "within", "below")] == [4, 5, 6]  # the test's data
-    want = [sum(v != "below" for v in check_verdicts(subset)) for subset in (rows, rows[::2])]
-    got = student.run(probe_count_not_worse, rows)
-    assert got == want + [0], (f"counts {got} for the rows, every other row and no row; "
-                               f"expected {want + [0]}: count the verdicts \"above\" and "
-                               f"\"within\"")
 
 
 # ------------------------------------------------------------------ written answers
