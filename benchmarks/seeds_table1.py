@@ -45,11 +45,16 @@ evaluated with ``--variant NAME`` (results in ``nodesN_NAME.*``). The first, OU 
         --agent 0=data/checkpoints/seeds/nodes6_sigma0.3_seed0 --agent S=...
 
 In the scene of issue 35 (no dampers, the authors' clipped sweep), the lever is settled again
-over seeds at equal transitions before any long run: seeds 0, 1, 2 of sigma 0.3 and of 0.15,
-with the command above and ``--out runs/i36_n6_sigma{0.3,0.15}_sS``; ``runs/`` is not in git,
-so each finished run is shipped to ``data/checkpoints/seeds/i36_n6_sigma{...}_seedS`` with its
-record, and a run that did not finish has its resume state committed under
-``data/checkpoints/resume/`` (copy it back to ``runs/`` and add ``--resume``).
+over seeds at the same budget (130 episodes per agent) before any long run: seeds 0, 1, 2 of
+sigma 0.3 and of 0.15, with the command above and ``--out runs/i36_n6_sigma{0.3,0.15}_sS``;
+``runs/`` is not in git, so each finished run is shipped to
+``data/checkpoints/seeds/i36_n6_sigma{0.3,0.15}_seedS`` with its record, and a run that did not
+finish has its resume state committed under ``data/checkpoints/resume/`` (copy it back to
+``runs/`` and add ``--resume``). Their evaluations are the variants ``scene35-sigma0.3`` and
+``scene35-sigma0.15``:
+
+    mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 6 --variant scene35-sigma0.15 \
+        --what "..." --agent 0=data/checkpoints/seeds/i36_n6_sigma0.15_seed0 --agent 1=...
 
 Each agent's evaluation is cached in ``benchmarks/results/seeds/cache`` under its actor's
 digest (the cache of ``dlo-course reproduce``), so a stopped run resumes at the agent it was in
