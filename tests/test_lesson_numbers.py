@@ -149,20 +149,29 @@ def test_listed_results_files_exist():
             assert (REPO / results_file).is_file(), results_file
 
 
+def unaccounted_numbers(stem, listed, derived, found_in) -> list[str]:
+    """The numbers ``found_in(text)`` finds in ``stem``'s markdown cells that are neither in
+    ``listed`` (printed by a cell), nor ``(stem, number)`` in ``derived``, nor in a cell that
+    says where it was measured offline."""
+    unaccounted = []
+    for kind, text in cells(stem):
+        if kind != "markdown" or OFFLINE in text:
+            continue
+        for match in found_in(text):
+            if (stem, match) in derived or any(match in number or number in match
+                                               for number in listed):
+                continue
+            unaccounted.append(match)
+    return unaccounted
+
+
 @pytest.mark.parametrize("stem", CHECKED)
 def test_measured_numbers_in_markdown_are_accounted_for(stem):
     """Percentages and "x ± y" in the markdown: each listed, derived, or in a cell that says
     where it was measured offline."""
     listed = {number for s, number, _, _ in NUMBERS if s == stem}
-    unaccounted = []
-    for kind, text in cells(stem):
-        if kind != "markdown" or OFFLINE in text:
-            continue
-        for match in [*PERCENT.findall(text), *PLUS_MINUS.findall(text)]:
-            if (stem, match) in DERIVED or any(match in number or number in match
-                                               for number in listed):
-                continue
-            unaccounted.append(match)
+    unaccounted = unaccounted_numbers(
+        stem, listed, DERIVED, lambda text: [*PERCENT.findall(text), *PLUS_MINUS.findall(text)])
     assert not unaccounted, (f"{stem}: numbers in markdown that no cell prints and no "
                              f"'{OFFLINE}...' covers: {unaccounted}")
 
@@ -278,19 +287,15 @@ def test_lessons_10_to_13_state_no_unbacked_number(stem):
     """Durations, percentages and "x ± y" in the markdown of lessons 10-13: each listed,
     derived, or in a cell that says where it was measured offline."""
     listed = {number for s, number, _, _ in [*NUMBERS, *NUMBERS_10_13] if s == stem}
-    unaccounted = []
-    for kind, text in cells(stem):
-        if kind != "markdown" or OFFLINE in text:
-            continue
+
+    def found_in(text):
         found = DURATION.findall(text)
         if stem not in CHECKED:  # CHECKED lessons' percentages have their own test above
             text = CONFIDENCE_LEVEL.sub("", text)
             found += [*PERCENT.findall(text), *PLUS_MINUS.findall(text)]
-        for match in found:
-            if (stem, match) in DERIVED_10_13 or any(match in number or number in match
-                                                     for number in listed):
-                continue
-            unaccounted.append(match)
+        return found
+
+    unaccounted = unaccounted_numbers(stem, listed, DERIVED_10_13, found_in)
     assert not unaccounted, (f"{stem}: numbers in markdown that no cell prints and no "
                              f"'{OFFLINE}...' covers: {unaccounted}")
 
