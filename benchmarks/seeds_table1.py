@@ -2,9 +2,10 @@
 
 Each shipped agent is one training seed. This script evaluates several agents trained with the
 same configuration and different ``--seed`` on Table I's cells *with reinitialisation* (both
-databases' test goals, 0.05 m and 0.03 m; the cells without reinitialisation are left out: on the
-paper's test goals they took 49.6 minutes of 2 ranks against 26.8 for the cells with, for the
-three node counts, benchmarks/results/reproduction_time.txt), then reports per cell:
+databases' test goals, 0.05 m and 0.03 m), and with ``--without`` on the cells without
+reinitialisation too (left out by default: on the paper's test goals they took 46.2 minutes of
+2 ranks against 13.2 for the cells with, for the three node counts,
+benchmarks/results/reproduction_time.txt), then reports per cell:
 
 * per seed: done % over the episodes with its Wilson interval (the episodes' luck);
 * over seeds: the mean done % and its 95% t-interval (the training's luck,
@@ -17,12 +18,16 @@ three node counts, benchmarks/results/reproduction_time.txt), then reports per c
     mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 6 \\
         --agent 0=data/checkpoints/nodes6 --agent 1=data/checkpoints/seeds/nodes6_seed1 ...
     python benchmarks/seeds_table1.py report --nodes 6
+    python benchmarks/seeds_table1.py table --use 2=VARIANT --use 4=VARIANT --use 6=VARIANT
     mpiexec -n 2 python benchmarks/seeds_table1.py validate --nodes 6 --agent 0=... ...
 
 ``validate`` says which seed to ship without looking at the test goals: Table I's protocol
 (with reinitialisation, 100 episodes, at most 30 actions) on the small database's records
 that are not among the paper's test goals (goal draw seed 7), scored at 0.03 m, ties broken
-at 0.05 m and then by the mean final distance; it writes ``nodesN_validation.md``.
+at 0.05 m and then by the mean final distance; it writes ``nodesN[_VARIANT]_validation.md``.
+Its candidates may differ by a lever as well as by the seed, so each ``--agent`` takes any
+plain label (``--agent sigma0.3-seed1=FOLDER``); each agent's validation is cached under its
+actor's digest, so adding a candidate later costs only that candidate.
 
 The 6-node seeds were trained with the shipped 6-node agent's configuration
 (data/checkpoints/nodes6/config.json), changing only the seed; a stopped run resumes with
@@ -56,6 +61,17 @@ finish has its resume state committed under ``data/checkpoints/resume/`` (copy i
     mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 6 --variant scene35-sigma0.15 \
         --what "..." --agent 0=data/checkpoints/seeds/i36_n6_sigma0.15_seed0 --agent 1=...
 
+The 4- and 2-node seeds in that scene take the shipped agents' configurations
+(data/checkpoints/nodes{4,2}/record.json: sigma 0.15, 60-action episodes that do not end at
+the goal, the best validated actor shipped), changing only the seed:
+
+    mpiexec -n 2 dlo-course train --preset recipe --nodes 4 --episodes 260 --seed S \
+        --out runs/i36_n4_sS
+    dlo-course ship runs/i36_n4_sS data/checkpoints/seeds/i36_n4_seedS --actor best
+    mpiexec -n 2 dlo-course train --preset recipe --nodes 2 --episodes 500 --seed S \
+        --out runs/i36_n2_sS
+    dlo-course ship runs/i36_n2_sS data/checkpoints/seeds/i36_n2_seedS --actor best
+
 Each agent's evaluation is cached in ``benchmarks/results/seeds/cache`` under its actor's
 digest (the cache of ``dlo-course reproduce``), so a stopped run resumes at the agent it was in
 and a report can be rebuilt on any machine. ``report`` writes
@@ -66,6 +82,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import hashlib
 import json
 import os
 import sys
@@ -75,8 +92,9 @@ from dlo_course import mpi
 import numpy as np
 
 from dlo_course.database import load_database
-from dlo_course.evaluation import evaluate_thresholds, seed_interval, wilson_interval
-from dlo_course.reproduce import Cell, evaluate_cells, read_paper_table
+from dlo_course.evaluation import (Summary, evaluate_thresholds, seed_interval,
+                                   wilson_interval)
+from dlo_course.reproduce import Cell, evaluate_cells, read_paper_table, table1_cells
 from dlo_course.rundir import agent_dir, run_record
 from dlo_course.task import TABLE_THRESHOLDS
 
@@ -86,8 +104,10 @@ EPISODES, MAX_STEPS, GOAL_SEED = 100, 30, 0  # the protocol of docs/reproduction
 VALIDATION_SEED = 7  # another draw than the test's, on other goals
 
 
-def cells(nodes: int) -> list[Cell]:
-    return [Cell("with", nodes, db, t) for db in ("small", "large") for t in TABLE_THRESHOLDS]
+def cells(nodes: int, without: bool = False) -> list[Cell]:
+    """The node count's Table I cells with reinitialisation, and without if ``without``."""
+    return [Cell(r, nodes, db, t) for r in ("with", "without")[:1 + without]
+            for db in ("small", "large") for t in TABLE_THRESHOLDS]
 
 
 def _stem(nodes: int, variant: str | None) -> str:
@@ -110,14 +130,14 @@ def _layout(seed: int, folder: Path, nodes: int, variant: str | None = None) -> 
 
 
 def run(nodes: int, agents: dict[int, Path], variant: str | None = None,
-        what: str | None = None) -> None:
+        what: str | None = None, without: bool = False) -> None:
     manifest = {}
     for seed, folder in sorted(agents.items()):
         if not (Path(folder) / "actor.pt").is_file():
             raise FileNotFoundError(f"seed {seed}: no actor.pt in {folder}")
         rows = evaluate_cells(_layout(seed, folder, nodes, variant), EPISODES, MAX_STEPS,
                               GOAL_SEED,
-                              cells=cells(nodes), protocol="test", cache=CACHE)
+                              cells=cells(nodes, without), protocol="test", cache=CACHE)
         if mpi.is_root():
             record = run_record(folder)
             manifest[str(seed)] = {"agent": str(folder), "transitions": record.get("transitions"),
@@ -138,7 +158,13 @@ def report(nodes: int, variant: str | None = None) -> str:
     what = manifest.pop("what", None)
     paper = read_paper_table()
     seeds = sorted(manifest, key=int)
-    lines = [f"# Table I over training seeds: {nodes} nodes, with reinitialisation"
+    # the cells every seed was evaluated on (a run with --without adds the chained ones)
+    evaluated = set.intersection(*({tuple(r["cell"]) for r in manifest[s]["rows"]}
+                                   for s in seeds))
+    table_cells = [c for c in cells(nodes, without=True) if c.key in evaluated]
+    reinits = sorted({c.reinit for c in table_cells}, reverse=True)  # "with" first
+    lines = [f"# Table I over training seeds: {nodes} nodes, "
+             + " and ".join(f"{r} reinitialisation" for r in reinits)
              + (f", variant `{variant}`" if variant else ""),
              "",
              *([f"What the variant changes from the shipped configuration: {what}.", ""]
@@ -153,11 +179,11 @@ def report(nodes: int, variant: str | None = None) -> str:
              f"The verdict (ours above, within or below the paper) compares the paper's number "
              f"with the union of the two intervals.",
              "",
-             "| database | threshold | " + " | ".join(f"seed {s}" for s in seeds)
+             "| reinit | database | threshold | " + " | ".join(f"seed {s}" for s in seeds)
              + " | mean over seeds | pooled episodes | paper | ours vs paper |",
-             "|---|---|" + "---|" * len(seeds) + "---|---|---|---|"]
+             "|---|---|---|" + "---|" * len(seeds) + "---|---|---|---|"]
     table = []
-    for cell in cells(nodes):
+    for cell in table_cells:
         per_seed = []
         for s in seeds:
             row = next(r for r in manifest[s]["rows"] if tuple(r["cell"]) == cell.key)
@@ -173,14 +199,14 @@ def report(nodes: int, variant: str | None = None) -> str:
         # The course's verdict (reproduce.verdict): where ours lies against the paper's number.
         where = ("below" if paper_done > union_high else "above" if paper_done < union_low
                  else "within")
-        lines.append(f"| {cell.database} | {cell.threshold:g} | "
+        lines.append(f"| {cell.reinit} | {cell.database} | {cell.threshold:g} | "
                      + " | ".join(f"{r['done_percent']:.0f} [{r['done_ci_low']:.0f}, "
                                   f"{r['done_ci_high']:.0f}]" for r in per_seed)
                      + (f" | {mean:.1f} [{max(low, 0):.1f}, {min(high, 100):.1f}] | "
                         if len(done) > 1 else f" | {mean:.1f} [one seed] | ")
                      + f"{100 * successes / episodes:.1f} [{pooled_low:.1f}, {pooled_high:.1f}] | "
                      f"{paper_done:g} | {where} |")
-        table.append({"nodes": nodes, "database": cell.database, "threshold": cell.threshold,
+        table.append({"reinit": cell.reinit, "nodes": nodes, "database": cell.database, "threshold": cell.threshold,
                       **{f"seed{s}_done_percent": r["done_percent"] for s, r in zip(seeds, per_seed)},
                       "mean_done_percent": mean, "seed_ci_low": low, "seed_ci_high": high,
                       "pooled_episodes": episodes, "pooled_ci_low": pooled_low,
@@ -203,6 +229,50 @@ def report(nodes: int, variant: str | None = None) -> str:
     return text
 
 
+def table(variants: dict[int, str | None]) -> str:
+    """Table I over seeds for every node count given: the rows of each ``nodesN[_VARIANT].csv``
+    (written by ``report``) in the paper's order, and how many cells the paper's number lies
+    above ours (``below``), within or under our intervals. Writes ``table1_seeds.md``."""
+    rows = []
+    for nodes, variant in sorted(variants.items()):
+        path = RESULTS / f"{_stem(nodes, variant)}.csv"
+        if not path.is_file():
+            raise FileNotFoundError(f"{path} is missing: run `seeds_table1.py run --nodes {nodes}"
+                                    f"{f' --variant {variant}' if variant else ''} ...` first")
+        with open(path, newline="") as f:
+            for row in csv.DictReader(f):
+                seeds = [k for k in row if k.startswith("seed") and k.endswith("_done_percent")]
+                rows.append({**row, "reinit": row.get("reinit", "with"), "variant": variant,
+                             "seeds": len(seeds)})
+    order = {key: i for i, key in enumerate(c.key for c in table1_cells())}
+    rows.sort(key=lambda r: order[(r["reinit"], int(r["nodes"]), r["database"],
+                                   round(float(r["threshold"]), 4))])
+    counts = {v: sum(r["verdict"] == v for r in rows) for v in ("above", "within", "below")}
+    lines = ["# Table I over training seeds", "",
+             "Each node count's cells from its report (`seeds_table1.py report`), made by "
+             "`python benchmarks/seeds_table1.py table "
+             + " ".join(f"--use {n}={v}" if v else f"--use {n}" for n, v in
+                        sorted(variants.items())) + "`. Mean done % over the seeds [95% "
+             "t-interval]; the verdict compares the paper's number with the union of that "
+             "interval and the pooled episodes' Wilson interval.", "",
+             f"**{len(rows)} cells: the paper's done % is not significantly above ours in "
+             f"{counts['above'] + counts['within']}** (ours above in {counts['above']}, within "
+             f"in {counts['within']}, below in {counts['below']}).", "",
+             "| reinit | nodes | database | threshold | agents | seeds | mean over seeds | "
+             "paper | ours vs paper |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['reinit']} | {r['nodes']} | {r['database']} | "
+                     f"{float(r['threshold']):g} | {r['variant'] or 'shipped configuration'} | "
+                     f"{r['seeds']} | {float(r['mean_done_percent']):.1f} "
+                     f"[{max(float(r['seed_ci_low']), 0):.1f}, "
+                     f"{min(float(r['seed_ci_high']), 100):.1f}] | "
+                     f"{float(r['paper_done_percent']):g} | {r['verdict']} |")
+    text = "\n".join(lines) + "\n"
+    (RESULTS / "table1_seeds.md").write_text(text)
+    print(text)
+    return text
+
+
 def held_out_goals(nodes: int) -> np.ndarray:
     """(K, nodes, 3): the small database's records that are not the paper's test goals (the
     trainer's validation goals come from the same set, dlo_course.trainer.validation_indices)."""
@@ -211,23 +281,42 @@ def held_out_goals(nodes: int) -> np.ndarray:
     return goals[np.setdiff1d(np.arange(len(goals)), database.test_indices(nodes))]
 
 
-def validate(nodes: int, agents: dict[int, Path], variant: str | None = None) -> str:
-    """Which seed validation picks: Table I's protocol on held-out goals (module docstring)."""
+def _validation_scores(nodes: int, folder: Path, goals: np.ndarray) -> dict[float, Summary]:
+    """One agent's validation, cached under its actor's digest like the test runs: a stopped
+    validation resumes at the agent it was in, and an agent is validated once whatever its
+    label or the other candidates."""
+    digest = hashlib.sha256((Path(folder) / "actor.pt").read_bytes()).hexdigest()[:12]
+    saved = CACHE / (f"validation_n{nodes}_e{EPISODES}_s{MAX_STEPS}_seed{VALIDATION_SEED}_"
+                     f"{digest}.json")
+    if saved.is_file():  # every rank sees the same file
+        return {float(t): Summary(**row) for t, row in json.loads(saved.read_text()).items()}
+    results = evaluate_thresholds(folder, goals, TABLE_THRESHOLDS, reinitialize=True,
+                                  episodes=EPISODES, max_steps=MAX_STEPS, seed=VALIDATION_SEED,
+                                  n_nodes=nodes, show_progress=False)
+    if mpi.is_root():
+        scores = {t: results[t][0] for t in TABLE_THRESHOLDS}
+        CACHE.mkdir(parents=True, exist_ok=True)
+        saved.write_text(json.dumps({str(t): v.as_dict() for t, v in scores.items()},
+                                    indent=1) + "\n")
+    mpi.barrier()  # the other ranks read the file rank 0 wrote
+    return {float(t): Summary(**row) for t, row in json.loads(saved.read_text()).items()}
+
+
+def validate(nodes: int, agents: dict[str, Path], variant: str | None = None) -> str:
+    """Which agent validation picks: Table I's protocol on held-out goals (module docstring).
+
+    ``agents`` maps a label (a seed, or e.g. ``sigma0.3-seed1`` when the candidates differ by
+    a lever as well) to the agent's folder."""
     goals = held_out_goals(nodes)
-    scores = {}
-    for seed, folder in sorted(agents.items()):
-        results = evaluate_thresholds(folder, goals, TABLE_THRESHOLDS, reinitialize=True,
-                                      episodes=EPISODES, max_steps=MAX_STEPS,
-                                      seed=VALIDATION_SEED, n_nodes=nodes, show_progress=False)
-        if mpi.is_root():
-            scores[seed] = {t: results[t][0] for t in TABLE_THRESHOLDS}
+    scores = {label: _validation_scores(nodes, folder, goals)
+              for label, folder in agents.items()}
     if not mpi.is_root():
         return ""
     strict, loose = min(TABLE_THRESHOLDS), max(TABLE_THRESHOLDS)
     pick = max(scores, key=lambda s: (scores[s][strict].done_percent,
                                       scores[s][loose].done_percent,
                                       -scores[s][strict].mean_distance))
-    lines = [f"# Which seed validation picks: {nodes} nodes"
+    lines = [f"# Which agent validation picks: {nodes} nodes"
              + (f", variant `{variant}`" if variant else ""), "",
              f"Table I's protocol (with reinitialisation, {EPISODES} episodes, at most "
              f"{MAX_STEPS} actions, goal draw seed {VALIDATION_SEED}) on the {len(goals)} "
@@ -235,11 +324,11 @@ def validate(nodes: int, agents: dict[int, Path], variant: str | None = None) ->
              f"`mpiexec -n 2 python benchmarks/seeds_table1.py validate --nodes {nodes} ...`. "
              f"Ranked by done % at {strict:g} m, then at {loose:g} m, then by the mean final "
              f"distance at {strict:g} m. The test goals play no part.", "",
-             f"| seed | agent | done % at {loose:g} m | done % at {strict:g} m | mean final "
+             f"| agent | folder | done % at {loose:g} m | done % at {strict:g} m | mean final "
              f"distance at {strict:g} m |", "|---|---|---|---|---|"]
-    for seed, by_threshold in scores.items():
+    for label, by_threshold in scores.items():
         low, high = by_threshold[loose], by_threshold[strict]
-        lines.append(f"| {seed}{' (picked)' if seed == pick else ''} | `{agents[seed]}` | "
+        lines.append(f"| {label}{' (picked)' if label == pick else ''} | `{agents[label]}` | "
                      f"{low.done_percent:.0f} [{low.done_ci_low:.0f}, {low.done_ci_high:.0f}] | "
                      f"{high.done_percent:.0f} [{high.done_ci_low:.0f}, "
                      f"{high.done_ci_high:.0f}] | {high.mean_distance:.4f} |")
@@ -252,33 +341,65 @@ def validate(nodes: int, agents: dict[int, Path], variant: str | None = None) ->
 
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("command", choices=("run", "report", "validate"))
-    parser.add_argument("--nodes", type=int, required=True, choices=(2, 4, 6))
+    parser.add_argument("command", choices=("run", "report", "validate", "table"))
+    parser.add_argument("--nodes", type=int, choices=(2, 4, 6),
+                        help="the node count (run, report, validate)")
+    parser.add_argument("--use", action="append", default=[], metavar="NODES[=VARIANT]",
+                        help="table: a node count and the variant whose report it takes "
+                             "(repeatable)")
     parser.add_argument("--agent", action="append", default=[], metavar="SEED=FOLDER",
                         help="a trained agent (run directory or agent folder) and its seed")
     parser.add_argument("--variant", default=None, metavar="NAME",
                         help="agents trained with a lever changed: results in nodesN_NAME.*")
     parser.add_argument("--what", default=None,
                         help="with --variant: what it changes, in words, for the report")
+    parser.add_argument("--without", action="store_true",
+                        help="run: the cells without reinitialisation too (chained episodes, "
+                             "about three times the minutes of the cells with)")
     args = parser.parse_args(argv)
     if args.variant is not None and not args.variant.replace("-", "").replace(".", "").isalnum():
         parser.error(f"--variant wants a plain name, got {args.variant!r}")
+    if args.command == "table":
+        if not args.use:
+            parser.error("table wants at least one --use NODES[=VARIANT]")
+        variants = {}
+        for item in args.use:
+            nodes, _, variant = item.partition("=")
+            if nodes not in ("2", "4", "6"):
+                parser.error(f"--use wants NODES[=VARIANT] with NODES 2, 4 or 6, got {item!r}")
+            variants[int(nodes)] = variant or None
+        try:
+            table(variants)
+        except FileNotFoundError as missing:
+            parser.error(str(missing))
+        return
+    if args.nodes is None:
+        parser.error(f"{args.command} wants --nodes")
     if args.command == "report":
         report(args.nodes, args.variant)
         return
     agents = {}
     for item in args.agent:
-        seed, _, folder = item.partition("=")
-        if not folder or not seed.isdigit():
-            parser.error(f"--agent wants SEED=FOLDER, got {item!r}")
-        agents[int(seed)] = Path(folder)
+        label, _, folder = item.partition("=")
+        # run: the label is the training seed; validate: any plain name (the candidates may
+        # differ by a lever as well as by the seed)
+        plain = label.replace("-", "").replace(".", "").replace("_", "").isalnum()
+        if not folder or not (label.isdigit() if args.command == "run" else plain):
+            parser.error(f"--agent wants {'SEED' if args.command == 'run' else 'LABEL'}=FOLDER, "
+                         f"got {item!r}")
+        if not (Path(folder) / "actor.pt").is_file():
+            parser.error(f"--agent {label}: no actor.pt in {folder}")
+        agents[label] = Path(folder)
+    if args.command == "validate":
+        if len(agents) < 2:
+            parser.error("give at least two --agent LABEL=FOLDER to choose among")
+        validate(args.nodes, agents, args.variant)
+        return
     if len(agents) < (1 if args.variant else 2):
         parser.error("give at least two --agent SEED=FOLDER: an interval over seeds needs two "
                      "(a --variant may start with one)")
-    if args.command == "validate":
-        validate(args.nodes, agents, args.variant)
-        return
-    run(args.nodes, agents, args.variant, args.what)
+    run(args.nodes, {int(k): v for k, v in agents.items()}, args.variant, args.what,
+        args.without)
 
 
 if __name__ == "__main__":
