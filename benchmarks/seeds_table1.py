@@ -16,7 +16,7 @@ benchmarks/results/reproduction_time.txt), then reports per cell:
   seed plays the same goals, so pooling does not sample more goals).
 
     mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 6 \\
-        --agent 0=data/checkpoints/nodes6 --agent 1=data/checkpoints/seeds/nodes6_seed1 ...
+        --agent 0=data/checkpoints/seeds/nodes6_seed0 --agent 1=data/checkpoints/seeds/nodes6_seed1 ...
     python benchmarks/seeds_table1.py report --nodes 6
     python benchmarks/seeds_table1.py table --use 2=VARIANT --use 4=VARIANT --use 6=VARIANT
     mpiexec -n 2 python benchmarks/seeds_table1.py validate --nodes 6 --agent 0=... ...
@@ -29,9 +29,9 @@ Its candidates may differ by a lever as well as by the seed, so each ``--agent``
 plain label (``--agent sigma0.3-seed1=FOLDER``); each agent's validation is cached under its
 actor's digest, so adding a candidate later costs only that candidate.
 
-The 6-node seeds were trained with the shipped 6-node agent's configuration
-(data/checkpoints/nodes6/config.json), changing only the seed; a stopped run resumes with
-``--resume`` added:
+The 6-node seeds were trained with the then shipped 6-node agent's configuration
+(data/checkpoints/seeds/nodes6_seed0/config.json), changing only the seed; a stopped run
+resumes with ``--resume`` added:
 
     mpiexec -n 2 dlo-course train --preset recipe --nodes 6 --env-kwargs '{"threshold": 0.05}' \
         --stop-at-goal --validate-every 0 --episodes 130 --seed S --out runs/recipe_n6_sS
