@@ -18,8 +18,8 @@ and holds exactly what :data:`BLOCKS` renders for its name from the repository's
   ``config.json``): the preset named in the training command, ranks, episodes,
   transitions, which actor was shipped, the training threshold and episode ending;
 * ``ablation``: the table of ``benchmarks/results/ablation/README.md``;
-* ``seeds``: Table I's cells with reinitialisation over training seeds, per node count, the
-  tables of ``benchmarks/results/seeds/nodesN.md`` (``benchmarks/seeds_table1.py``);
+* ``seeds``: Table I's cells over training seeds, the tables of the reports in
+  :data:`SEEDS_REPORTS` (``benchmarks/results/seeds/``, ``benchmarks/seeds_table1.py``);
 * ``database``: our small database against the authors'
   (``benchmarks/results/database_vs_authors.txt``);
 * ``fidelity``: the committed databases against the authors' sweeps, record by record
@@ -221,14 +221,24 @@ def ablation_markdown(root: Path = REPO_ROOT) -> str:
     return "\n".join(_table_lines(text)) + "\n"
 
 
+SEEDS_REPORTS = (
+    ("nodes6_scene35-sigma0.3", "6 nodes, the scene of issue 35, OU sigma 0.3 (the shipped "
+                                "6-node agent is its seed 2, picked by validation)"),
+    ("nodes6_scene35-sigma0.15", "6 nodes, the scene of issue 35, OU sigma 0.15"),
+    ("nodes6", "6 nodes, the scene before issue 35 (edge dampers), OU sigma 0.15"),
+)
+"""The over-seeds reports (``benchmarks/results/seeds/<stem>.md``) the ``seeds`` block shows,
+each with its caption, newest scene first; a report not yet made is left out."""
+
+
 def seeds_markdown(root: Path = REPO_ROOT) -> str:
-    """The over-seeds tables of ``benchmarks/seeds_table1.py report``, one per node count that
-    has one (variants, ``nodesN_NAME.md``, are left to their files)."""
+    """The over-seeds tables of ``benchmarks/seeds_table1.py report`` (:data:`SEEDS_REPORTS`),
+    on the paper's test goals."""
     parts = []
-    for nodes in (2, 4, 6):
-        path = root / "benchmarks/results/seeds" / f"nodes{nodes}.md"
+    for stem, caption in SEEDS_REPORTS:
+        path = root / "benchmarks/results/seeds" / f"{stem}.md"
         if path.is_file():
-            parts.append(f"{nodes} nodes, with reinitialisation, on the paper's test goals:\n\n"
+            parts.append(f"{caption}, on the paper's test goals (`{path.relative_to(root)}`):\n\n"
                          + "\n".join(_table_lines(path.read_text())) + "\n")
     return "\n".join(parts)
 
