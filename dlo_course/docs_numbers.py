@@ -27,8 +27,8 @@ and holds exactly what :data:`BLOCKS` renders for its name from the repository's
 * ``tip-reads`` and ``before-after``: what reading the tip with forward kinematics changes,
   and the scene before and after issue 35 (``benchmarks/results/tip_reads.txt``,
   ``scene_before_after.txt``);
-* ``scenes``: the shipped agents' Table I in the scene before issue 35 and now
-  (``docs/reproduction/before_issue35/`` and ``docs/reproduction/``);
+* ``scenes``: the agents trained in the old scene, Table I in the scene before issue 35 and
+  in its scene (``docs/reproduction/before_issue35/`` and ``before_issue36/``);
 * ``speed``: ``benchmarks/results/bench_env.txt`` and ``dlo_train_throughput.txt``;
 * ``reproduction-time``: the protocol summary of ``benchmarks/results/reproduction_time.txt``;
 * ``exercises`` and ``course-size``: the graded items of every lesson and their points, and the
@@ -269,9 +269,12 @@ def fidelity_markdown(root: Path = REPO_ROOT) -> str:
 
 
 def scenes_markdown(root: Path = REPO_ROOT) -> str:
-    """The shipped agents' Table I before and after issue 35's scene, beside the paper:
-    ``docs/reproduction/before_issue35/`` against ``docs/reproduction/`` (both protocols)."""
-    before_dir, now_dir = root / "docs/reproduction/before_issue35", root / "docs/reproduction"
+    """The agents trained in the old scene, Table I before and after issue 35's scene, beside
+    the paper: ``docs/reproduction/before_issue35/`` against ``before_issue36/`` (both
+    protocols; issue 36 replaced the 6-node agent, so the shipped agents' own report, one
+    folder up, no longer isolates the scene)."""
+    before_dir = root / "docs/reproduction/before_issue35"
+    now_dir = root / "docs/reproduction/before_issue36"
     lines = ["| goals | reinit | nodes | database | at 0.05 m: before / now / paper | "
              "at 0.03 m: before / now / paper |", "|---|---|---|---|---|---|"]
     for name, goals in (("table1.csv", "test"), ("table1_whole_database.csv", "whole")):
