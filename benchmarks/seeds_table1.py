@@ -82,7 +82,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import hashlib
 import json
 import os
 import sys
@@ -94,7 +93,8 @@ import numpy as np
 from dlo_course.database import load_database
 from dlo_course.evaluation import (Summary, evaluate_thresholds, seed_interval,
                                    wilson_interval)
-from dlo_course.reproduce import Cell, evaluate_cells, read_paper_table, table1_cells
+from dlo_course.reproduce import (Cell, actor_digest, evaluate_cells, read_paper_table,
+                                  table1_cells)
 from dlo_course.rundir import agent_dir, run_record
 from dlo_course.task import TABLE_THRESHOLDS
 
@@ -285,7 +285,7 @@ def _validation_scores(nodes: int, folder: Path, goals: np.ndarray) -> dict[floa
     """One agent's validation, cached under its actor's digest like the test runs: a stopped
     validation resumes at the agent it was in, and an agent is validated once whatever its
     label or the other candidates."""
-    digest = hashlib.sha256((Path(folder) / "actor.pt").read_bytes()).hexdigest()[:12]
+    digest = actor_digest(folder)
     saved = CACHE / (f"validation_n{nodes}_e{EPISODES}_s{MAX_STEPS}_seed{VALIDATION_SEED}_"
                      f"{digest}.json")
     if saved.is_file():  # every rank sees the same file

@@ -99,13 +99,19 @@ def goal_source(database: str, protocol: str) -> str:
     return f"{database}-test" if protocol == "test" else database
 
 
+def actor_digest(agent: Path) -> str:
+    """The name of an agent's cached evaluations: the first 12 hex digits of its actor's
+    SHA-256."""
+    return hashlib.sha256((Path(agent) / "actor.pt").read_bytes()).hexdigest()[:12]
+
+
 def _policy(agents: Path | None, controller: str | None, n_nodes: int) -> tuple[object, str]:
     """What plays a cell's episodes, and a digest that names it for the cache: the trained
     agent of ``agents`` (its actor's weights) or the named classical controller (its
     settings)."""
     if controller is None:
         agent = agent_dir(agents, n_nodes)
-        return agent, hashlib.sha256((agent / "actor.pt").read_bytes()).hexdigest()[:12]
+        return agent, actor_digest(agent)
     from dlo_course.jacobian import CONTROLLERS  # only when a controller is asked for
 
     policy = CONTROLLERS[controller](n_nodes)
