@@ -61,6 +61,19 @@ finish has its resume state committed under ``data/checkpoints/resume/`` (copy i
     mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 6 --variant scene35-sigma0.15 \
         --what "..." --agent 0=data/checkpoints/seeds/i36_n6_sigma0.15_seed0 --agent 1=...
 
+The next lever for the 6-node large box is the budget: the three sigma 0.3 seeds were still
+improving at their 130th episode (training success over the last 26 episodes 75, 83 and 81%
+against 67-71% over the 26 before), so each is trained on to 260 episodes from its 130-episode
+resume state (``episodes`` may be raised on resume, and nothing in a run depends on its total),
+in a copy of its run folder, ``runs/i36_n6_sigma0.3_e260_sS``:
+
+    mpiexec -n 2 dlo-course train --preset recipe --nodes 6 --env-kwargs '{"threshold": 0.05}' \
+        --stop-at-goal --validate-every 0 --episodes 260 --noise-sigma 0.3 --seed S \
+        --out runs/i36_n6_sigma0.3_e260_sS --resume
+    dlo-course ship runs/i36_n6_sigma0.3_e260_sS data/checkpoints/seeds/i36_n6_sigma0.3_e260_seedS
+    mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 6 --variant scene35-sigma0.3-e260 \
+        --what "..." --agent 0=data/checkpoints/seeds/i36_n6_sigma0.3_e260_seed0 --agent 1=...
+
 The 4- and 2-node seeds in that scene take the shipped agents' configurations
 (data/checkpoints/nodes{4,2}/record.json: sigma 0.15, 60-action episodes that do not end at
 the goal, the best validated actor shipped), changing only the seed:
@@ -71,6 +84,14 @@ the goal, the best validated actor shipped), changing only the seed:
     mpiexec -n 2 dlo-course train --preset recipe --nodes 2 --episodes 500 --seed S \
         --out runs/i36_n2_sS
     dlo-course ship runs/i36_n2_sS data/checkpoints/seeds/i36_n2_seedS --actor best
+
+and are evaluated on all eight cells of their node count, then validated to pick the one to
+ship (the variant ``scene35``, as for 4 nodes here):
+
+    mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 4 --variant scene35 --without \
+        --what "..." --agent 0=data/checkpoints/seeds/i36_n4_seed0 --agent 1=... --agent 2=...
+    mpiexec -n 2 python benchmarks/seeds_table1.py validate --nodes 4 --variant scene35 \
+        --agent seed0=data/checkpoints/seeds/i36_n4_seed0 --agent seed1=... --agent seed2=...
 
 Each agent's evaluation is cached in ``benchmarks/results/seeds/cache`` under its actor's
 digest (the cache of ``dlo-course reproduce``), so a stopped run resumes at the agent it was in
