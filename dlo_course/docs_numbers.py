@@ -225,6 +225,8 @@ SEEDS_REPORTS = (
     ("nodes6_scene35-sigma0.3", "6 nodes, the scene of issue 35, OU sigma 0.3 (the shipped "
                                 "6-node agent is its seed 2, picked by validation)"),
     ("nodes6_scene35-sigma0.15", "6 nodes, the scene of issue 35, OU sigma 0.15"),
+    ("nodes4_scene35", "4 nodes, the scene of issue 35, the shipped 4-node configuration "
+                       "(260 episodes per agent, OU sigma 0.15, the best validated actor)"),
     ("nodes6", "6 nodes, the scene before issue 35 (edge dampers), OU sigma 0.15"),
 )
 """The over-seeds reports (``benchmarks/results/seeds/<stem>.md``) the ``seeds`` block shows,
