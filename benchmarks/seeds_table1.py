@@ -65,7 +65,9 @@ The next lever for the 6-node large box is the budget: the three sigma 0.3 seeds
 improving at their 130th episode (training success over the last 26 episodes 75, 83 and 81%
 against 67-71% over the 26 before), so each is trained on to 260 episodes from its 130-episode
 resume state (``episodes`` may be raised on resume, and nothing in a run depends on its total),
-in a copy of its run folder, ``runs/i36_n6_sigma0.3_e260_sS``:
+in a copy of its run folder, ``runs/i36_n6_sigma0.3_e260_sS`` (the 130-episode states, about
+30 MB each, are not in git: where they are missing, leave out ``--resume``, and the run trains
+its 260 episodes from the start with the same seed):
 
     mpiexec -n 2 dlo-course train --preset recipe --nodes 6 --env-kwargs '{"threshold": 0.05}' \
         --stop-at-goal --validate-every 0 --episodes 260 --noise-sigma 0.3 --seed S \
