@@ -315,15 +315,20 @@ def course_options(record: dict) -> str:
     return ", ".join(parts) or "none"
 
 
+DEFAULT_EPISODES = 50
+"""Test episodes per setting by default: with them the default run (Table I's 24 settings)
+takes about half an hour on 2 cores, under the 45 minutes a first look may take; 100 (the
+committed report) takes about an hour, of which 46 minutes are the runs without
+reinitialisation (benchmarks/results/reproduction_time.txt)."""
 WHOLE_DATABASE_CELLS = {"with": "with", "all": None, "none": ()}
 """Which cells the whole-database table covers: those "with" reinitialisation, all, or none."""
 PAPER_CORE_HOURS = 32 * 3.5  # 32 cores for under 3.5 h
 PAPER_TRANSITIONS = 32 * 63 * 300
 
 
-def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = 100,
+def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = DEFAULT_EPISODES,
               max_steps: int = 30, seed: int = 0, train_preset: str | None = None,
-              time_mode: str = "code", whole_database: str = "with",
+              time_mode: str = "code", whole_database: str = "none",
               controller: str | None = None, controller_cells: str = "with",
               nodes: tuple[int, ...] = NODE_COUNTS) -> Path | None:
     """Regenerate Table I and Figs. 4-5 (see the module docstring); returns the report path
