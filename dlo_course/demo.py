@@ -24,10 +24,9 @@ DEFAULT_AGENT_GOALS = "small-test"
 
 DEFAULT_GOAL_INDEX = 15
 """The goal an agent's demo shows unless told otherwise: small-test goal 15. The shipped
-4-node agent brings the rod from 0.19 m to 0.047 m of it in 7 actions, below the demo's
-0.05 m (``benchmarks/results/recipe/nodes4_small_test_reinit.json``); the shipped 2- and 6-node
-agents reach it too, both to 0.040 m (``nodes2_small_test_reinit.json``,
-``nodes6_small_test_reinit.json``)."""
+4-node agent brings the rod from 0.188 m to 0.041 m of it in 8 actions, below the demo's
+0.05 m; the shipped 2- and 6-node agents reach it too, to 0.040 m in 7 actions and 0.037 m in
+8 (``dlo-course demo --agent data/checkpoints/nodesN``, issue 36)."""
 
 HOLD_SECONDS = 1.5
 """How long the videos show each episode's last frame."""

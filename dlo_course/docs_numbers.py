@@ -222,11 +222,16 @@ def ablation_markdown(root: Path = REPO_ROOT) -> str:
 
 
 SEEDS_REPORTS = (
-    ("nodes6_scene35-sigma0.3", "6 nodes, the scene of issue 35, OU sigma 0.3 (the shipped "
-                                "6-node agent is its seed 2, picked by validation)"),
+    ("nodes6_scene35-sigma0.3-e260", "6 nodes, the scene of issue 35, OU sigma 0.3, 260 "
+                                     "episodes per agent (the shipped 6-node agent is its seed "
+                                     "2, picked by validation)"),
+    ("nodes6_scene35-sigma0.3", "6 nodes, the scene of issue 35, OU sigma 0.3, 130 episodes "
+                                "per agent"),
     ("nodes6_scene35-sigma0.15", "6 nodes, the scene of issue 35, OU sigma 0.15"),
-    ("nodes4_scene35", "4 nodes, the scene of issue 35, the shipped 4-node configuration "
-                       "(260 episodes per agent, OU sigma 0.15, the best validated actor)"),
+    ("nodes4_scene35", "4 nodes, the scene of issue 35, the configuration of the 4-node agent "
+                       "shipped before (260 episodes per agent, OU sigma 0.15, the best "
+                       "validated actor; the shipped 4-node agent is its seed 2, picked by "
+                       "validation)"),
     ("nodes6", "6 nodes, the scene before issue 35 (edge dampers), OU sigma 0.15"),
 )
 """The over-seeds reports (``benchmarks/results/seeds/<stem>.md``) the ``seeds`` block shows,
