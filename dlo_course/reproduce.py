@@ -317,7 +317,8 @@ def course_options(record: dict) -> str:
 
 DEFAULT_EPISODES = 50
 """Test episodes per setting by default: with them the default run (Table I's 24 settings)
-takes about half an hour on 2 cores, under the 45 minutes a first look may take; 100 (the
+took 19.4 minutes on 2 cores in a fresh clone, under the 45 minutes a first look may take
+(benchmarks/results/reproduction_time_default.txt); 100 (the
 committed report) takes about an hour, of which 46 minutes are the runs without
 reinitialisation (benchmarks/results/reproduction_time.txt)."""
 WHOLE_DATABASE_CELLS = {"with": "with", "all": None, "none": ()}
