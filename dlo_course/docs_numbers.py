@@ -166,6 +166,7 @@ def table1_markdown(root: Path = REPO_ROOT) -> str:
         f"- A classical controller, shape servoing with an online Jacobian estimate, on the same "
         f"episodes: below the agents in {lower} of its {len(jacobian)} settings "
         f"(`docs/reproduction/table1_jacobian.md`).")
+    lines += _seeds_line(root)
     floor = _test_goal_floor(root)
     lines.append(
         f"- Doing nothing already meets {'/'.join(floor[n] for n in sorted(floor))} of the "
@@ -219,6 +220,29 @@ def ablation_markdown(root: Path = REPO_ROOT) -> str:
     """The ablation's table, as ``benchmarks/ablation.py report`` wrote it."""
     text = (root / "benchmarks/results/ablation/README.md").read_text()
     return "\n".join(_table_lines(text)) + "\n"
+
+
+def _seeds_line(root: Path) -> list[str]:
+    """Table I over training seeds (``benchmarks/results/seeds/table1_seeds.md``, written by
+    ``seeds_table1.py table``) in one line, so that the README's Table I, one seed per node
+    count, says how its cells fare over three; nothing while that table is not made."""
+    path = root / "benchmarks/results/seeds/table1_seeds.md"
+    if not path.is_file():
+        return []
+    # rows: reinit | nodes | database | threshold | agents | seeds | mean [CI] | paper | verdict
+    rows = [[c.strip() for c in line.strip("|").split("|")]
+            for line in _table_lines(path.read_text())[2:]]
+    nodes = sorted({int(r[1]) for r in rows})
+    seeds = sorted({int(r[5]) for r in rows})
+    below = [r for r in rows if r[8] == "below"]
+    where = "; below: " + ", ".join(
+        f"{r[1]} nodes, {r[2]} box, {r[0]} reinitialisation, {r[3]} m ({r[6]} against "
+        f"{r[7]})" for r in below) if below else ""
+    return [f"- Over {'-'.join(map(str, seeds))} training seeds of each shipped configuration "
+            f"({'/'.join(map(str, nodes))} nodes: "
+            f"`benchmarks/results/seeds/table1_seeds.md`, mean and t-interval over the seeds): "
+            f"the paper's done % is not significantly above ours in "
+            f"{len(rows) - len(below)} of {len(rows)} settings{where}."]
 
 
 SEEDS_REPORTS = (

@@ -99,6 +99,23 @@ def test_a_changed_shipped_actor_is_caught(tmp_path):
     assert docs_numbers.stale_blocks(root) == ["README.md: agents"]
 
 
+def test_the_seeds_line_follows_the_seeds_table(tmp_path):
+    root = _copy_sources(tmp_path)
+    path = root / "benchmarks/results/seeds/table1_seeds.md"
+    before = docs_numbers.table1_markdown(root)
+    assert "training seeds of each shipped configuration" in before
+    lines = path.read_text().splitlines()
+    row = next(i for i, line in enumerate(lines) if line.endswith("| within |"))
+    lines[row] = lines[row][:-len("| within |")] + "| below |"  # one more cell below the paper
+    path.write_text("\n".join(lines) + "\n")
+    after = docs_numbers.table1_markdown(root)
+    counted = [line for line in after.splitlines() if "training seeds" in line][0]
+    rows = [line for line in lines if line.startswith("| with")]
+    below = sum(line.endswith("| below |") for line in rows)
+    assert f"in {len(rows) - below} of {len(rows)} settings" in counted
+    assert docs_numbers.stale_blocks(root) == ["README.md: table1"]
+
+
 def test_a_changed_exercise_is_caught(tmp_path):
     # An exercise worth one point more in a solution: the lessons' table and both totals move.
     root = _copy_sources(tmp_path)
