@@ -160,7 +160,8 @@ def test_the_floor_is_a_share_of_what_doing_nothing_leaves():
 def test_actors_that_behave_like_a_shipped_one_are_refused_whatever_their_bytes(tmp_path):
     """The student's attempts of issue 37, without simulation: a shipped actor changed by
     1e-6, scaled by 1.0001, loaded and saved again, or with a byte appended behaves like the
-    shipped one; a seed's agent has 6 nodes; a fresh actor behaves like none of them."""
+    shipped one; a 2-node seed's agent behaves like itself; a 4- or 6-node seed's agent has
+    the wrong node count; a fresh actor behaves like none of them."""
 
     attempts = [changed_actor(SHIPPED2, tmp_path / "w.pt", one_weight),
                 changed_actor(SHIPPED2, tmp_path / "s.pt", scaled),
@@ -174,7 +175,16 @@ def test_actors_that_behave_like_a_shipped_one_are_refused_whatever_their_bytes(
         assert "behaves like the shipped checkpoints/nodes2/actor.pt" in problem, path.name
     seeds = sorted((AGENTS_DIR / "seeds").rglob(submission.ACTOR_NAME))
     assert seeds and set(seeds) <= set(submission.shipped_actor_files())
-    (problem,) = submission.likeness_problems(submission.actor_behaviour(seeds[0]))
+
+    def nodes_of(actor: Path) -> int:
+        return json.loads((actor.parent / "config.json").read_text())["config"]["env_kwargs"][
+            "n_nodes"]
+
+    for seed in [p for p in seeds if nodes_of(p) == 2][:1]:  # issue 36's 2-node seeds
+        (problem,) = submission.likeness_problems(submission.actor_behaviour(seed))
+        assert f"behaves like the shipped checkpoints/{seed.parent.relative_to(AGENTS_DIR)}/" in problem
+    other = next(p for p in seeds if nodes_of(p) != 2)
+    (problem,) = submission.likeness_problems(submission.actor_behaviour(other))
     assert "lesson 9 trains a 2-node agent" in problem
     fresh = submission.actor_behaviour(fresh_actor(tmp_path / "fresh.pt", seed=13))
     assert submission.likeness_problems(fresh) == []
