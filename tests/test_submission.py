@@ -180,9 +180,9 @@ def test_actors_that_behave_like_a_shipped_one_are_refused_whatever_their_bytes(
         return json.loads((actor.parent / "config.json").read_text())["config"]["env_kwargs"][
             "n_nodes"]
 
-    for seed in [p for p in seeds if nodes_of(p) == 2][:1]:  # issue 36's 2-node seeds
-        (problem,) = submission.likeness_problems(submission.actor_behaviour(seed))
-        assert f"behaves like the shipped checkpoints/{seed.parent.relative_to(AGENTS_DIR)}/" in problem
+    two = next(p for p in seeds if nodes_of(p) == 2)  # issue 36's 2-node seeds
+    (problem,) = submission.likeness_problems(submission.actor_behaviour(two))
+    assert f"behaves like the shipped checkpoints/{two.parent.relative_to(AGENTS_DIR)}/" in problem
     other = next(p for p in seeds if nodes_of(p) != 2)
     (problem,) = submission.likeness_problems(submission.actor_behaviour(other))
     assert "lesson 9 trains a 2-node agent" in problem
