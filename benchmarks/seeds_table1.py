@@ -256,7 +256,8 @@ def report(nodes: int, variant: str | None = None) -> str:
 def table(variants: dict[int, str | None]) -> str:
     """Table I over seeds for every node count given: the rows of each ``nodesN[_VARIANT].csv``
     (written by ``report``) in the paper's order, and how many cells the paper's number lies
-    above ours (``below``), within or under our intervals. Writes ``table1_seeds.md``."""
+    above ours (``below``), within or under our intervals. Writes ``table1_seeds.md`` for
+    people and ``table1_seeds.csv`` (one row per cell) for the README's generated line."""
     rows = []
     for nodes, variant in sorted(variants.items()):
         path = RESULTS / f"{_stem(nodes, variant)}.csv"
@@ -293,6 +294,12 @@ def table(variants: dict[int, str | None]) -> str:
                      f"{float(r['paper_done_percent']):g} | {r['verdict']} |")
     text = "\n".join(lines) + "\n"
     (RESULTS / "table1_seeds.md").write_text(text)
+    fields = ["reinit", "nodes", "database", "threshold", "variant", "seeds",
+              "mean_done_percent", "seed_ci_low", "seed_ci_high", "paper_done_percent", "verdict"]
+    with open(RESULTS / "table1_seeds.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+        writer.writeheader()
+        writer.writerows(rows)
     print(text)
     return text
 

@@ -223,21 +223,23 @@ def ablation_markdown(root: Path = REPO_ROOT) -> str:
 
 
 def _seeds_line(root: Path) -> list[str]:
-    """Table I over training seeds (``benchmarks/results/seeds/table1_seeds.md``, written by
-    ``seeds_table1.py table``) in one line, so that the README's Table I, one seed per node
-    count, says how its cells fare over three; nothing while that table is not made."""
-    path = root / "benchmarks/results/seeds/table1_seeds.md"
+    """Table I over training seeds (``benchmarks/results/seeds/table1_seeds.csv``, written by
+    ``seeds_table1.py table`` beside its Markdown table) in one line, so that the README's
+    Table I, one seed per node count, says how its cells fare over three; nothing while that
+    table is not made."""
+    path = root / "benchmarks/results/seeds/table1_seeds.csv"
     if not path.is_file():
         return []
-    # rows: reinit | nodes | database | threshold | agents | seeds | mean [CI] | paper | verdict
-    rows = [[c.strip() for c in line.strip("|").split("|")]
-            for line in _table_lines(path.read_text())[2:]]
-    nodes = sorted({int(r[1]) for r in rows})
-    seeds = sorted({int(r[5]) for r in rows})
-    below = [r for r in rows if r[8] == "below"]
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    nodes = sorted({int(r["nodes"]) for r in rows})
+    seeds = sorted({int(r["seeds"]) for r in rows})
+    below = [r for r in rows if r["verdict"] == "below"]
     where = "; below: " + ", ".join(
-        f"{r[1]} nodes, {r[2]} box, {r[0]} reinitialisation, {r[3]} m ({r[6]} against "
-        f"{r[7]})" for r in below) if below else ""
+        f"{r['nodes']} nodes, {r['database']} box, {r['reinit']} reinitialisation, "
+        f"{float(r['threshold']):g} m ({float(r['mean_done_percent']):.1f} "
+        f"[{max(float(r['seed_ci_low']), 0):.1f}, {min(float(r['seed_ci_high']), 100):.1f}] "
+        f"against {float(r['paper_done_percent']):g})" for r in below) if below else ""
     return [f"- Over {'-'.join(map(str, seeds))} training seeds of each shipped configuration "
             f"({'/'.join(map(str, nodes))} nodes: "
             f"`benchmarks/results/seeds/table1_seeds.md`, mean and t-interval over the seeds): "
