@@ -115,6 +115,7 @@ from dlo_course import mpi
 import numpy as np
 
 from dlo_course.database import load_database
+from dlo_course.docs_numbers import SEEDS_INTERVAL, format_done_interval
 from dlo_course.evaluation import (Summary, evaluate_thresholds, seed_interval,
                                    wilson_interval)
 from dlo_course.reproduce import (Cell, actor_digest, evaluate_cells, read_paper_table,
@@ -226,7 +227,7 @@ def report(nodes: int, variant: str | None = None) -> str:
         lines.append(f"| {cell.reinit} | {cell.database} | {cell.threshold:g} | "
                      + " | ".join(f"{r['done_percent']:.0f} [{r['done_ci_low']:.0f}, "
                                   f"{r['done_ci_high']:.0f}]" for r in per_seed)
-                     + (f" | {mean:.1f} [{max(low, 0):.1f}, {min(high, 100):.1f}] | "
+                     + (f" | {format_done_interval(mean, low, high)} | "
                         if len(done) > 1 else f" | {mean:.1f} [one seed] | ")
                      + f"{100 * successes / episodes:.1f} [{pooled_low:.1f}, {pooled_high:.1f}] | "
                      f"{paper_done:g} | {where} |")
@@ -288,14 +289,12 @@ def table(variants: dict[int, str | None]) -> str:
     for r in rows:
         lines.append(f"| {r['reinit']} | {r['nodes']} | {r['database']} | "
                      f"{float(r['threshold']):g} | {r['variant'] or 'shipped configuration'} | "
-                     f"{r['seeds']} | {float(r['mean_done_percent']):.1f} "
-                     f"[{max(float(r['seed_ci_low']), 0):.1f}, "
-                     f"{min(float(r['seed_ci_high']), 100):.1f}] | "
+                     f"{r['seeds']} | {format_done_interval(*(float(r[k]) for k in SEEDS_INTERVAL))} | "
                      f"{float(r['paper_done_percent']):g} | {r['verdict']} |")
     text = "\n".join(lines) + "\n"
     (RESULTS / "table1_seeds.md").write_text(text)
-    fields = ["reinit", "nodes", "database", "threshold", "variant", "seeds",
-              "mean_done_percent", "seed_ci_low", "seed_ci_high", "paper_done_percent", "verdict"]
+    fields = ["reinit", "nodes", "database", "threshold", "variant", "seeds", *SEEDS_INTERVAL,
+              "paper_done_percent", "verdict"]
     with open(RESULTS / "table1_seeds.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
         writer.writeheader()

@@ -222,6 +222,22 @@ def ablation_markdown(root: Path = REPO_ROOT) -> str:
     return "\n".join(_table_lines(text)) + "\n"
 
 
+SEEDS_INTERVAL = ("mean_done_percent", "seed_ci_low", "seed_ci_high")
+"""The columns of ``table1_seeds.csv`` that hold a cell's mean done % over seeds and its
+t-interval, in the order :func:`format_done_interval` takes them."""
+
+
+def format_done_interval(mean: float, low: float, high: float) -> str:
+    """A done % over seeds as the reports print it: ``"mean [low, high]"`` to one decimal.
+
+    A t-interval is symmetric, so with seeds that disagree it can reach past 0 or 100 %,
+    which no done % can: the printed bounds are clipped to that range (the verdicts use the
+    unclipped interval, which gives the same answer against any paper number in it). Shared
+    with ``benchmarks/seeds_table1.py``, whose tables the README's seeds line quotes.
+    """
+    return f"{mean:.1f} [{max(low, 0.0):.1f}, {min(high, 100.0):.1f}]"
+
+
 def _seeds_line(root: Path) -> list[str]:
     """Table I over training seeds (``benchmarks/results/seeds/table1_seeds.csv``, written by
     ``seeds_table1.py table`` beside its Markdown table) in one line, so that the README's
@@ -237,8 +253,7 @@ def _seeds_line(root: Path) -> list[str]:
     below = [r for r in rows if r["verdict"] == "below"]
     where = "; below: " + ", ".join(
         f"{r['nodes']} nodes, {r['database']} box, {r['reinit']} reinitialisation, "
-        f"{float(r['threshold']):g} m ({float(r['mean_done_percent']):.1f} "
-        f"[{max(float(r['seed_ci_low']), 0):.1f}, {min(float(r['seed_ci_high']), 100):.1f}] "
+        f"{float(r['threshold']):g} m ({format_done_interval(*(float(r[k]) for k in SEEDS_INTERVAL))} "
         f"against {float(r['paper_done_percent']):g})" for r in below) if below else ""
     return [f"- Over {'-'.join(map(str, seeds))} training seeds of each shipped configuration "
             f"({'/'.join(map(str, nodes))} nodes: "

@@ -24,6 +24,7 @@ import torch
 
 from dlo_course import submission
 from dlo_course.ddpg import Actor, load_network, save_network
+from dlo_course.evaluation import load_actor
 from dlo_course.grading.grade import grade, leaderboard_markdown
 from dlo_course.grading.notebooks import GRADING_TESTS_DIR
 from dlo_course.paths import AGENTS_DIR, REPO_ROOT
@@ -176,14 +177,11 @@ def test_actors_that_behave_like_a_shipped_one_are_refused_whatever_their_bytes(
     seeds = sorted((AGENTS_DIR / "seeds").rglob(submission.ACTOR_NAME))
     assert seeds and set(seeds) <= set(submission.shipped_actor_files())
 
-    def nodes_of(actor: Path) -> int:
-        return json.loads((actor.parent / "config.json").read_text())["config"]["env_kwargs"][
-            "n_nodes"]
-
-    two = next(p for p in seeds if nodes_of(p) == 2)  # issue 36's 2-node seeds
+    nodes = {p: load_actor(p)[1] for p in seeds}  # as the grader reads it: from the actor
+    two = next(p for p in seeds if nodes[p] == 2)  # issue 36's 2-node seeds
     (problem,) = submission.likeness_problems(submission.actor_behaviour(two))
     assert f"behaves like the shipped checkpoints/{two.parent.relative_to(AGENTS_DIR)}/" in problem
-    other = next(p for p in seeds if nodes_of(p) != 2)
+    other = next(p for p in seeds if nodes[p] != 2)
     (problem,) = submission.likeness_problems(submission.actor_behaviour(other))
     assert "lesson 9 trains a 2-node agent" in problem
     fresh = submission.actor_behaviour(fresh_actor(tmp_path / "fresh.pt", seed=13))
