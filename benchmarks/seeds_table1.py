@@ -77,9 +77,9 @@ its 260 episodes from the start with the same seed):
         --what "..." --agent 0=data/checkpoints/seeds/i36_n6_sigma0.3_e260_seed0 --agent 1=...
 
 The 4- and 2-node seeds in that scene take the configurations of the agents shipped before
-issue 36 (data/checkpoints/seeds/nodes4_seed0/record.json, data/checkpoints/nodes2/record.json:
-sigma 0.15, 60-action episodes that do not end at the goal, the best validated actor
-shipped), changing only the seed:
+issue 36 (data/checkpoints/seeds/nodes{4,2}_seed0/record.json: sigma 0.15, 60-action
+episodes that do not end at the goal, the best validated actor shipped), changing only the
+seed:
 
     mpiexec -n 2 dlo-course train --preset recipe --nodes 4 --episodes 260 --seed S \
         --out runs/i36_n4_sS

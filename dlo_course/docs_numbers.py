@@ -269,6 +269,10 @@ SEEDS_REPORTS = (
     ("nodes6_scene35-sigma0.3", "6 nodes, the scene of issue 35, OU sigma 0.3, 130 episodes "
                                 "per agent"),
     ("nodes6_scene35-sigma0.15", "6 nodes, the scene of issue 35, OU sigma 0.15"),
+    ("nodes2_scene35", "2 nodes, the scene of issue 35, the configuration of the 2-node agent "
+                       "shipped before (500 episodes per agent, OU sigma 0.15, the best "
+                       "validated actor; the shipped 2-node agent is its seed 1, picked by "
+                       "validation)"),
     ("nodes4_scene35", "4 nodes, the scene of issue 35, the configuration of the 4-node agent "
                        "shipped before (260 episodes per agent, OU sigma 0.15, the best "
                        "validated actor; the shipped 4-node agent is its seed 2, picked by "
