@@ -317,7 +317,7 @@ def course_options(record: dict) -> str:
 
 DEFAULT_EPISODES = 50
 """Test episodes per setting by default: with them the default run (Table I's 24 settings)
-took 19.4 minutes on 2 cores in a fresh clone, under the 45 minutes a first look may take
+took 18.4 minutes on 2 cores in a fresh clone (install not counted), under the 45 minutes a first look may take
 (benchmarks/results/reproduction_time_default.txt); 100 (the
 committed report) takes about an hour, of which 46 minutes are the runs without
 reinitialisation (benchmarks/results/reproduction_time.txt)."""
