@@ -115,7 +115,8 @@ from dlo_course import mpi
 import numpy as np
 
 from dlo_course.database import load_database
-from dlo_course.docs_numbers import SEEDS_INTERVAL, format_done_interval
+from dlo_course.docs_numbers import (SEEDS_INTERVAL, format_done_interval,
+                                     format_row_interval)
 from dlo_course.evaluation import (Summary, evaluate_thresholds, seed_interval,
                                    wilson_interval)
 from dlo_course.reproduce import (Cell, actor_digest, evaluate_cells, read_paper_table,
@@ -289,7 +290,7 @@ def table(variants: dict[int, str | None]) -> str:
     for r in rows:
         lines.append(f"| {r['reinit']} | {r['nodes']} | {r['database']} | "
                      f"{float(r['threshold']):g} | {r['variant'] or 'shipped configuration'} | "
-                     f"{r['seeds']} | {format_done_interval(*(float(r[k]) for k in SEEDS_INTERVAL))} | "
+                     f"{r['seeds']} | {format_row_interval(r)} | "
                      f"{float(r['paper_done_percent']):g} | {r['verdict']} |")
     text = "\n".join(lines) + "\n"
     (RESULTS / "table1_seeds.md").write_text(text)

@@ -238,6 +238,12 @@ def format_done_interval(mean: float, low: float, high: float) -> str:
     return f"{mean:.1f} [{max(low, 0.0):.1f}, {min(high, 100.0):.1f}]"
 
 
+def format_row_interval(row: dict[str, str]) -> str:
+    """:func:`format_done_interval` of one row of ``table1_seeds.csv`` (or of a node count's
+    report CSV), whose values are strings."""
+    return format_done_interval(*(float(row[k]) for k in SEEDS_INTERVAL))
+
+
 def _seeds_line(root: Path) -> list[str]:
     """Table I over training seeds (``benchmarks/results/seeds/table1_seeds.csv``, written by
     ``seeds_table1.py table`` beside its Markdown table) in one line, so that the README's
@@ -253,7 +259,7 @@ def _seeds_line(root: Path) -> list[str]:
     below = [r for r in rows if r["verdict"] == "below"]
     where = "; below: " + ", ".join(
         f"{r['nodes']} nodes, {r['database']} box, {r['reinit']} reinitialisation, "
-        f"{float(r['threshold']):g} m ({format_done_interval(*(float(r[k]) for k in SEEDS_INTERVAL))} "
+        f"{float(r['threshold']):g} m ({format_row_interval(r)} "
         f"against {float(r['paper_done_percent']):g})" for r in below) if below else ""
     return [f"- Over {'-'.join(map(str, seeds))} training seeds of each shipped configuration "
             f"({'/'.join(map(str, nodes))} nodes: "

@@ -317,9 +317,9 @@ def course_options(record: dict) -> str:
 
 DEFAULT_EPISODES = 50
 """Test episodes per setting by default: with them the default run (Table I's 24 settings)
-took 18.4 minutes on 2 cores in a fresh clone (install not counted), under the 45 minutes a first look may take
-(benchmarks/results/reproduction_time_default.txt); 100 (the
-committed report) takes about an hour, of which 46 minutes are the runs without
+took 18.4 minutes on 2 cores in a fresh clone (install not counted), under the 45 minutes a
+first look may take (benchmarks/results/reproduction_time_default.txt); 100 (the committed
+report) takes about an hour, of which 46 minutes are the runs without
 reinitialisation (benchmarks/results/reproduction_time.txt)."""
 WHOLE_DATABASE_CELLS = {"with": "with", "all": None, "none": ()}
 """Which cells the whole-database table covers: those "with" reinitialisation, all, or none."""
