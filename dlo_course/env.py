@@ -110,7 +110,12 @@ class DLOShapeEnv(gym.Env):
     * ``threshold``: success distance (m); the paper trains at 0.05 and tests at 0.05 and 0.03
       (:data:`dlo_course.task.TRAIN_THRESHOLD`, :data:`dlo_course.task.TABLE_THRESHOLDS`).
     * ``render_mode``: None, "rgb_array" (an image of robot and rod, P_c blue and P_d red
-      crosses) or "human" (PyBullet's GUI; needs a display).
+      crosses) or "human" (PyBullet's GUI; needs a display). Without one, "human" raises a
+      ``RuntimeError`` here, at ``gymnasium.make``
+      (:func:`dlo_course.simulation.check_display`), where PyBullet itself would end the
+      interpreter. So gymnasium's ``check_env`` with its render check passes where there is a
+      screen and fails with that error on a headless machine, since it makes the environment
+      in every render mode: there, call it with ``skip_render_check=True``.
     * ``time_mode``: physics time per action, "code" (3 ms, the authors' code; the default) or
       "paper" (0.06 s, 20 times the compute): a shortcut for ``params.with_(time_mode=...)``,
       and the one to use; given, it overrides ``params.time_mode``.

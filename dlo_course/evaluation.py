@@ -39,7 +39,7 @@ from dlo_course import mpi
 from dlo_course.database import resolve_goals
 from dlo_course.ddpg import Actor, load_network, policy_action
 from dlo_course.rundir import ACTOR_FILE
-from dlo_course.snapshot import fork_available, run_in_fork
+from dlo_course.snapshot import fork_available, run_in_fork, torch_threads
 from dlo_course.task import (NODE_COUNTS, TRAIN_THRESHOLD, nodes_of_observation_size,
                              observation_size, reached, split_observation)
 
@@ -362,6 +362,16 @@ def run_traces(actor, env, episode_ids: Sequence[int], goal_indices: np.ndarray,
         fork = fork_available() and not getattr(getattr(rod, "scene", None), "gui", True)
     fork = bool(fork and repeatable and hasattr(rod, "set_goal")
                 and not _rewrites_observations(env))
+    # One torch thread, forked or not: a forked child can only compute on one (the parent's
+    # OpenMP pool does not survive the fork, dlo_course.snapshot), so the rebuilt episodes do
+    # too and give the same bits; a batch of one observation gains nothing from more.
+    with torch_threads(1):
+        return _run_chain(actor, env, rod, episode_ids, goal_indices, reinitialize, max_steps,
+                          progress, fork, repeatable)
+
+
+def _run_chain(actor, env, rod, episode_ids, goal_indices, reinitialize, max_steps, progress,
+               fork, repeatable) -> list[EpisodeTrace]:
     settled = False  # with fork: the world has been rebuilt and settled once
     traces, seen = [], {}
     for i, episode in enumerate(episode_ids):

@@ -13,6 +13,8 @@ Four words, each for one thing, in the code and in its docstrings:
   ``critic.pt``          its critic (the first one, with twin critics)
   ``best_actor.pt``      the actor that did best on the validation goals, if any
   ``best.json``          when it was saved and how well it did
+  ``validated/``         every validated actor, ``actor_epNNNNNN.pt``: a larger validation
+                         after training can pick among them (:func:`validated_actors`)
   ``checkpoints/``       the *resume state* (below)
   ====================== ============================================================
 
@@ -61,6 +63,7 @@ ACTOR_FILE = "actor.pt"
 CRITIC_FILE = "critic.pt"
 BEST_ACTOR_FILE = "best_actor.pt"
 BEST_FILE = "best.json"
+VALIDATED_DIR = "validated"
 RECORD_FILE = "record.json"
 RESUME_DIR = "checkpoints"
 """The resume state's folder inside a run directory (its name predates this module)."""
@@ -370,6 +373,26 @@ def save_best_actor(run_dir: Path, actor: torch.nn.Module, counters: dict[str, A
                 "transitions": counters["best_transitions"],
                 "done_rate": counters["best_done_rate"],
                 "distance_mean": counters["best_distance"]}, run_dir / BEST_FILE)
+
+
+def save_validated_actor(run_dir: Path, actor: torch.nn.Module, episode: int) -> Path:
+    """Keep the actor that was just validated at ``episode`` (``validated/actor_epNNNNNN.pt``).
+
+    The validation during training is small (30 goals by default: a few goals' difference
+    decides which actor is "best"), so every candidate is kept for a larger validation to
+    choose from afterwards; an actor file is about 0.3 MB."""
+    path = Path(run_dir) / VALIDATED_DIR / f"actor_ep{episode:06d}.pt"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    _save_network_file(actor, path)
+    return path
+
+
+def validated_actors(run_dir: str | Path) -> dict[int, Path]:
+    """The actors :func:`save_validated_actor` kept in a run directory, by episode (empty for
+    a run without validation, or one trained before they were kept)."""
+    folder = Path(run_dir) / VALIDATED_DIR
+    return {int(p.stem.removeprefix("actor_ep")): p
+            for p in sorted(folder.glob("actor_ep*.pt"))}
 
 
 # --- trained agents: the record, and shipping a run ---

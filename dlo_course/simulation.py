@@ -273,6 +273,35 @@ class StepTimings:
         self.actions = 0
 
 
+def display_problem() -> str | None:
+    """Why PyBullet's GUI cannot open here, or ``None`` if it may. Only X11 (Linux and the
+    BSDs) is checked: there, with no reachable X server, PyBullet's GUI connection ends the
+    whole Python process ("cannot connect to X server") instead of failing."""
+    if sys.platform in ("darwin", "win32"):
+        return None
+    display = os.environ.get("DISPLAY", "")
+    if not display:
+        return "DISPLAY is not set: this machine has no screen for PyBullet's GUI"
+    host, _, number = display.rpartition(":")
+    number = number.split(".")[0]
+    if host in ("", "unix") and number.isdigit() \
+            and not os.path.exists(f"/tmp/.X11-unix/X{number}"):
+        return f"no X server listens on DISPLAY={display} (/tmp/.X11-unix/X{number} is missing)"
+    return None
+
+
+def check_display() -> None:
+    """Raise ``RuntimeError`` where PyBullet's GUI cannot open (:func:`display_problem`),
+    before PyBullet ends the interpreter for want of a screen."""
+    problem = display_problem()
+    if problem:
+        raise RuntimeError(
+            f'render_mode="human" opens PyBullet\'s GUI, and {problem}. Use '
+            f'render_mode="rgb_array" for images (env.render() returns them), run under a '
+            f'virtual screen (xvfb-run), or, for gymnasium\'s check_env, pass '
+            f'skip_render_check=True')
+
+
 class RodScene:
     """One PyBullet world: plane, Panda, rod anchored to the ground and to the flange.
 
@@ -288,6 +317,8 @@ class RodScene:
     def __init__(self, params: SimParams | None = None, gui: bool = False) -> None:
         self.params = params or SimParams()
         self.gui = gui
+        if gui:
+            check_display()
         self.mesh_path = ensure_mesh(self.params)
         with quiet_c_stdout():  # the first connection prints PyBullet's build time
             self.client = p.connect(p.GUI if gui else p.DIRECT)

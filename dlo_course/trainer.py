@@ -556,6 +556,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True,
                                     best_episode=episode + 1,
                                     best_transitions=counters["transitions"])
                 if root:
+                    rundir.save_validated_actor(out, agent.actor, episode + 1)
                     if better:
                         rundir.save_best_actor(out, agent.actor, counters)
                     checked = {"episode": episode + 1, "transitions": counters["transitions"],

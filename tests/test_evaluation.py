@@ -177,25 +177,6 @@ def test_forked_episodes_equal_rebuilt_ones_bit_for_bit(checkpoint, goals_2):
         env.close()
 
 
-def test_run_in_fork_isolates_and_reports_failures(monkeypatch):
-    from dlo_course import snapshot
-
-    state = {"n": 1}
-
-    def change_and_return():
-        state["n"] = 99
-        return np.arange(3)
-
-    np.testing.assert_array_equal(snapshot.run_in_fork(change_and_return), [0, 1, 2])
-    assert state["n"] == 1  # the child's change stayed in the child
-    with pytest.raises(RuntimeError, match="ZeroDivisionError"):
-        snapshot.run_in_fork(lambda: 1 / 0)
-    monkeypatch.setenv(snapshot.NO_FORK_VARIABLE, "1")
-    assert not snapshot.fork_available()
-    monkeypatch.setenv(snapshot.NO_FORK_VARIABLE, "0")
-    assert snapshot.fork_available()
-
-
 def test_without_reinitialization_episodes_continue_from_the_last_shape(checkpoint, goals_2):
     actor, _ = load_actor(checkpoint)
     schedule = np.array([2, 2])
