@@ -27,13 +27,3 @@ def user_environment(**extra: str) -> dict[str, str]:
     env.update(extra)
     return env
 
-
-def strip_user_environment(monkeypatch) -> None:
-    """The same, applied to this process with pytest's ``monkeypatch`` (for a kernel or a
-    child that inherits the test's environment)."""
-    for name in list(os.environ):
-        if name in THREAD_VARIABLES or name.startswith(COURSE_PREFIX):
-            monkeypatch.delenv(name)
-    if (os.cpu_count() or 1) < 2:
-        monkeypatch.setenv("OMP_NUM_THREADS", "2")
-    monkeypatch.setenv("MPLBACKEND", "Agg")
