@@ -453,9 +453,9 @@ the run has them."""
 
 def ship_run(run_dir: str | Path, dest: str | Path, actor: str = "latest", **extra: Any
              ) -> Path:
-    """Copy a finished run's networks, configuration and learning curve into ``dest`` (e.g.
-    ``data/checkpoints/nodes4``) as a trained agent, without its resume state (the replay
-    buffers), and write ``record.json``: what the training cost (:func:`run_record`) plus
+    """Copy a finished run's networks, configuration, learning curve and validated actors
+    (``validated/``) into ``dest`` (e.g. ``data/checkpoints/nodes4``) as a trained agent,
+    without its resume state (the replay buffers), and write ``record.json``: what the training cost (:func:`run_record`) plus
     ``extra`` (e.g. ``commit=...`` for runs started before the trainer recorded it).
 
     Args:
@@ -483,6 +483,12 @@ def ship_run(run_dir: str | Path, dest: str | Path, actor: str = "latest", **ext
             shutil.copy2(run_dir / name, dest / name)
         elif (dest / name).exists():
             (dest / name).unlink()  # left from a run shipped here before
+    # Every validated actor goes along, so that a later, larger validation can choose among
+    # them without the run directory (validated_actors reads them from either place).
+    if (dest / VALIDATED_DIR).is_dir():
+        shutil.rmtree(dest / VALIDATED_DIR)
+    if (run_dir / VALIDATED_DIR).is_dir():
+        shutil.copytree(run_dir / VALIDATED_DIR, dest / VALIDATED_DIR)
     if actor == "best":
         shutil.copy2(run_dir / BEST_ACTOR_FILE, dest / ACTOR_FILE)
         extra["selected"] = read_json(run_dir / BEST_FILE)

@@ -27,6 +27,7 @@ from dlo_course.grading.bundle import STUDENT_EXCLUDE, release_student
 from dlo_course.grading.grade import grade, grading_command
 from dlo_course.paths import AGENTS_DIR
 from dlo_course.submission import CSV_COLUMNS
+from user_env import use_user_environment
 
 REPO = Path(__file__).resolve().parents[1]
 SOLUTIONS, LESSONS = REPO / "solutions", REPO / "lessons"
@@ -458,9 +459,11 @@ def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path,
     missing = notebooks.missing_data(notebooks.read_notebook(path))
     if missing:
         pytest.skip(f"needs {', '.join(str(m) for m in missing)} (not generated yet)")
-    monkeypatch.setenv("DLO_COURSE_FAST", "1")
-    monkeypatch.setenv("DLO_COURSE_OUTPUT", str(tmp_path / "output"))
-    monkeypatch.setenv("MPLBACKEND", "Agg")
+    # The kernel starts as a student's does: default torch threads, none of the suite's
+    # variables (lessons 09, 10, 13, 14 and 16 fork episodes after loading an agent, which hung
+    # with several threads: issue 48), only fast mode and an output folder set.
+    use_user_environment(monkeypatch, DLO_COURSE_FAST="1",
+                         DLO_COURSE_OUTPUT=str(tmp_path / "output"))
     nb = nbformat.read(path, as_version=4)
     client = nbclient.NotebookClient(nb, timeout=240, kernel_name="python3",
                                      resources={"metadata": {"path": str(tmp_path)}})

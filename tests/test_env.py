@@ -337,3 +337,48 @@ def test_observation_reference_makes_observations_of_order_one(make_env, far_goa
     for _ in range(3):
         obs, *_ = env.step([1.0, -1.0, -1.0])
         assert np.all(np.abs((obs - offset) / scale)[:6] < 3.0)
+
+
+HEADLESS = """
+import sys
+import gymnasium as gym
+from gymnasium.utils.env_checker import check_env
+import dlo_course
+attempts = [lambda: gym.make("DLOShape-v0", n_nodes=4, render_mode="human")]
+if "check_env" in sys.argv:  # its render check comes after a few steps: once is enough
+    attempts.append(lambda: check_env(gym.make("DLOShape-v0", n_nodes=4).unwrapped))
+for attempt in attempts:
+    try:
+        attempt()
+    except RuntimeError as err:
+        print("raised:", err)
+    else:
+        print("opened")
+print("still alive")
+"""
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("display", ["", ":97"], ids=["no DISPLAY", "no X server"])
+def test_the_gui_without_a_screen_is_a_clear_error_not_the_end_of_python(display):
+    """PyBullet's GUI connection ends the interpreter where no X server answers; the
+    environment checks first and raises, at gym.make and in gymnasium's check_env with its
+    render check (which makes a render_mode="human" copy), and the process goes on."""
+    import subprocess
+    import sys
+
+    from user_env import user_environment
+
+    env = user_environment()
+    env.pop("DISPLAY", None)
+    if display:
+        env["DISPLAY"] = display  # a display number with no server behind it
+    argv = [sys.executable, "-c", HEADLESS] + ([] if display else ["check_env"])
+    done = subprocess.run(argv, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    lines = [line for line in done.stdout.splitlines() if line.startswith(("raised", "opened"))]
+    assert len(lines) == (1 if display else 2), done.stdout
+    assert all(line.startswith("raised:") for line in lines), done.stdout
+    assert all("xvfb-run" in line and "skip_render_check=True" in line for line in lines)
+    assert ("no X server listens" if display else "DISPLAY is not set") in lines[0]
+    assert done.stdout.rstrip().endswith("still alive")

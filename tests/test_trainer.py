@@ -13,7 +13,8 @@ from dlo_course.config import PRESETS, DDPGConfig, TrainConfig, preset
 from dlo_course.ddpg import DDPG, load_network
 from dlo_course.noise import OUNoise
 from dlo_course.replay_buffer import ReplayBuffer
-from dlo_course.rundir import PROGRESS_COLUMNS, load_config, read_progress, ship_run
+from dlo_course.rundir import (PROGRESS_COLUMNS, load_config, read_progress, ship_run,
+                              validated_actors)
 from dlo_course.trainer import make_env, run_episode, train, validation_indices
 
 
@@ -490,6 +491,12 @@ def test_recipe_smoke_run_on_the_rod(tmp_path):
     record = json.loads((shipped / "record.json").read_text())
     assert record["selected"]["episode"] == 2 and record["episodes_per_agent"] == 3
     assert (shipped / "actor.pt").read_bytes() == (run / "best_actor.pt").read_bytes()
+    # Every validated actor is kept, in the run and in the shipped agent, for a later choice.
+    kept = validated_actors(run)
+    assert list(kept) == [2] and list(validated_actors(shipped)) == [2]
+    best_weights = load_network(run / "best_actor.pt").state_dict()
+    for name, weights in load_network(kept[2]).state_dict().items():
+        assert torch.equal(weights, best_weights[name]), name
 
 
 def test_validation_goals_hold_out_the_papers_test_goals():
