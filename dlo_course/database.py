@@ -231,6 +231,32 @@ class Database:
         """(T, n_nodes, 3) the goals Table I was measured on (see :meth:`test_indices`)."""
         return self.goals(n_nodes)[self.test_indices(n_nodes)]
 
+    def held_out_indices(self, n_nodes: int, size: int, seed: int,
+                         like_test: bool = True) -> np.ndarray:
+        """(size,) record indices that are not the paper's test goals, drawn with repeats
+        from ``seed``: goals to choose an agent on without looking at the test.
+
+        With ``like_test``, the draw has the test's mix of sweep levels: the test goals come
+        mostly from the sweep's first, least compressed level (FACTS.md; 4 nodes: 735, 158 and
+        37 of its 930 draws from levels 0, 1 and 2), while the records left over lie mostly
+        on the compressed levels below, so a uniform draw among them measures another task,
+        and did not rank agents as the test does (benchmarks/validation_vs_test.py). Each
+        draw takes a level with the test's frequency, then a held-out record of that level.
+        Without, the draw is uniform over every held-out record."""
+        test = self.test_indices(n_nodes)
+        held_out = np.setdiff1d(np.arange(len(self)), test)
+        rng = np.random.default_rng(seed)
+        if not like_test:
+            return rng.choice(held_out, size=size)
+        levels = sweep_levels(BOXES[self.box])
+        share = np.bincount(levels[test], minlength=levels.max() + 1) / len(test)
+        drawn_levels = rng.choice(len(share), size=size, p=share)
+        by_level = {level: held_out[levels[held_out] == level] for level in np.unique(drawn_levels)}
+        if any(len(records) == 0 for records in by_level.values()):
+            raise ValueError(f"a sweep level of the test has no held-out record ({n_nodes} "
+                             f"nodes, {self.box} box)")
+        return np.array([rng.choice(by_level[level]) for level in drawn_levels])
+
 
 @lru_cache(maxsize=1)
 def _authors_test_records() -> dict[tuple[int, str], np.ndarray]:

@@ -80,6 +80,28 @@ T_975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 
          9: 2.262, 10: 2.228}
 
 
+def rank_correlation(a, b) -> float:
+    """Spearman's rank correlation of two (K,) score arrays (ties take their mean rank): 1 when
+    ``a`` orders K agents as ``b`` does, -1 when reversed, about 0 when unrelated. How well a
+    validation predicts the test (benchmarks/validation_vs_test.py)."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    if a.shape != b.shape or a.ndim != 1 or len(a) < 2:
+        raise ValueError(f"want two (K,) arrays with K >= 2, got {a.shape} and {b.shape}")
+
+    def ranks(x):
+        order = np.argsort(x, kind="stable")
+        r = np.empty(len(x))
+        r[order] = np.arange(len(x), dtype=float)
+        for value in np.unique(x):  # ties: their mean rank
+            r[x == value] = r[x == value].mean()
+        return r
+
+    ra, rb = ranks(a), ranks(b)
+    if ra.std() == 0 or rb.std() == 0:
+        return float("nan")  # all scores equal: no order to compare
+    return float(np.corrcoef(ra, rb)[0, 1])
+
+
 def seed_interval(values, axis: int = 0) -> tuple:
     """Mean over independent runs (seeds) and its 95% t-interval.
 

@@ -288,3 +288,35 @@ def test_seed_interval_matches_the_t_formula():
     assert m.tolist() == [1.0, 1.0] and lo[1] == hi[1] == 1.0 and lo[0] < 0 < 2 < hi[0]
     with pytest.raises(ValueError, match="2 to"):
         seed_interval([1.0])
+
+
+def test_rank_correlation_is_spearmans():
+    from dlo_course.evaluation import rank_correlation
+
+    assert rank_correlation([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1)
+    assert rank_correlation([1, 2, 3, 4], [9, 7, 5, 1]) == pytest.approx(-1)
+    # Ranks, not values: a monotone transform changes nothing.
+    assert rank_correlation([1, 2, 3, 4], [1, 8, 27, 1000]) == pytest.approx(1)
+    # Ties take their mean rank: ranks (1.5, 1.5, 3, 4) against (1, 2, 3, 4).
+    expected = np.corrcoef([1.5, 1.5, 3, 4], [1, 2, 3, 4])[0, 1]
+    assert rank_correlation([5, 5, 6, 7], [1, 2, 3, 4]) == pytest.approx(expected)
+    assert np.isnan(rank_correlation([1, 1, 1], [1, 2, 3]))
+    with pytest.raises(ValueError):
+        rank_correlation([1, 2], [1, 2, 3])
+
+
+def test_held_out_goals_like_the_test_follow_its_sweep_levels():
+    from dlo_course.database import BOXES, load_database, sweep_levels
+
+    database = load_database("small")
+    levels = sweep_levels(BOXES["small"])
+    test = database.test_indices(4)
+    drawn = database.held_out_indices(4, size=2000, seed=7)
+    assert not np.isin(drawn, test).any()  # never a test goal
+    share = np.bincount(levels[drawn], minlength=6) / len(drawn)
+    np.testing.assert_allclose(share, np.bincount(levels[test], minlength=6) / len(test),
+                               atol=0.03)  # 735, 158, 37 of 930 on levels 0, 1, 2
+    np.testing.assert_array_equal(drawn, database.held_out_indices(4, size=2000, seed=7))
+    uniform = database.held_out_indices(4, size=2000, seed=7, like_test=False)
+    assert not np.isin(uniform, test).any()
+    assert (levels[uniform] >= 3).mean() > 0.5  # most held-out records lie on levels 3-5
