@@ -171,7 +171,8 @@ class TrainedAgentError(ValueError):
 
 def load_actor(agent: str | Path, n_nodes: int | None = None):
     """Load the actor of a trained agent: a run directory, a shipped agent's folder (both
-    hold ``actor.pt``) or an actor file.
+    hold ``actor.pt``) or an actor file; or an off-the-shelf agent's folder
+    (``sb3_model.zip``, :mod:`dlo_course.baselines`), as a module of the same shapes.
 
     Args:
         n_nodes: when given, the actor must have been trained for that many nodes.
@@ -183,20 +184,26 @@ def load_actor(agent: str | Path, n_nodes: int | None = None):
     Raises:
         TrainedAgentError: with a message that says what is wrong and what to do.
     """
+    from dlo_course import baselines
+
     path = Path(agent)
-    if path.is_dir():
-        path = path / ACTOR_FILE
-    if not path.is_file():
-        raise TrainedAgentError(f"no trained agent at {agent}: expected a run directory or "
-                                f"an agent folder with {ACTOR_FILE}, or the file itself "
-                                "(train one with `dlo-course train`)")
-    try:
-        actor = load_network(path)
-    except Exception as err:  # torch and pickle raise many kinds
-        raise TrainedAgentError(f"{path} is not a readable actor file "
-                                f"({type(err).__name__}: {err})") from err
-    if not isinstance(actor, Actor):
-        raise TrainedAgentError(f"{path} holds a {type(actor).__name__}, not an Actor")
+    if baselines.is_sb3_agent(path):  # an off-the-shelf agent, played like ours
+        actor = baselines.load_sb3_actor(path)
+    else:
+        if path.is_dir():
+            path = path / ACTOR_FILE
+        if not path.is_file():
+            raise TrainedAgentError(f"no trained agent at {agent}: expected a run directory "
+                                    f"or an agent folder with {ACTOR_FILE} (or "
+                                    f"{baselines.SB3_MODEL_FILE}), or the file itself "
+                                    "(train one with `dlo-course train`)")
+        try:
+            actor = load_network(path)
+        except Exception as err:  # torch and pickle raise many kinds
+            raise TrainedAgentError(f"{path} is not a readable actor file "
+                                    f"({type(err).__name__}: {err})") from err
+        if not isinstance(actor, Actor):
+            raise TrainedAgentError(f"{path} holds a {type(actor).__name__}, not an Actor")
     obs_dim = actor.init_kwargs["obs_dim"]
     act_dim = actor.init_kwargs["act_dim"]
     trained_nodes = nodes_of_observation_size(obs_dim)

@@ -101,8 +101,13 @@ def goal_source(database: str, protocol: str) -> str:
 
 def actor_digest(agent: Path) -> str:
     """The name of an agent's cached evaluations: the first 12 hex digits of its actor's
-    SHA-256."""
-    return hashlib.sha256((Path(agent) / "actor.pt").read_bytes()).hexdigest()[:12]
+    SHA-256 (an off-the-shelf agent's: its model file's, :mod:`dlo_course.baselines`)."""
+    from dlo_course.baselines import SB3_MODEL_FILE
+
+    policy = Path(agent) / "actor.pt"
+    if not policy.is_file() and (Path(agent) / SB3_MODEL_FILE).is_file():
+        policy = Path(agent) / SB3_MODEL_FILE
+    return hashlib.sha256(policy.read_bytes()).hexdigest()[:12]
 
 
 def _policy(agents: Path | None, controller: str | None, n_nodes: int) -> tuple[object, str]:
