@@ -157,8 +157,12 @@ def train_sb3(algorithm: str, out: str | Path, total_steps: int, env_kwargs: dic
             model.load_replay_buffer(out / SB3_BUFFER_FILE)
         wall = state["wall_time_s"]
     else:
+        # A buffer as long as the run never drops a transition, so it behaves as SB3's
+        # default of a million does (sampling is uniform over what is stored), and its
+        # checkpoint is 60 times smaller (350 MB for 16 458 steps with the default).
         model = cls("MlpPolicy", env, seed=seed,
-                    **{**sb3_settings(algorithm), **(overrides or {})})
+                    **{"buffer_size": total_steps, **sb3_settings(algorithm),
+                       **(overrides or {})})
         wall = 0.0
     done = int(model.num_timesteps)
     started = time.monotonic()
