@@ -73,6 +73,16 @@ NUMBERS = [
     ("15_why_ddpg_stalls", "91%", "benchmarks/results/ablation/README.md", "| 91 (84-95)"),
     ("15_why_ddpg_stalls", "62%", "benchmarks/results/ablation/README.md", "| 62 (52-71)"),
     ("15_why_ddpg_stalls", "95%", "benchmarks/results/ablation/README.md", "| 95 (89-98)"),
+    ("15_why_ddpg_stalls", "71%", "benchmarks/results/ablation/README.md", "| 71 (61-79)"),
+    ("15_why_ddpg_stalls", "78%", "benchmarks/results/ablation/README.md", "| 78 (69-85)"),
+    ("15_why_ddpg_stalls", "27%", "benchmarks/results/ablation/README.md", "| 27 (19-36)"),
+    # the recipe against SB3 TD3, with reinitialisation, small test goals, 0.05 and 0.03 m
+    ("15_why_ddpg_stalls", "100%", "benchmarks/results/sb3_vs_recipe.md",
+     "| 100 [96, 100] | 65 [55, 74] |"),
+    ("15_why_ddpg_stalls", "65%", "benchmarks/results/sb3_vs_recipe.md", "| 65 [55, 74] |"),
+    ("15_why_ddpg_stalls", "83%", "benchmarks/results/sb3_vs_recipe.md",
+     "| 83 [74, 89] | 26 [18, 35] |"),
+    ("15_why_ddpg_stalls", "26%", "benchmarks/results/sb3_vs_recipe.md", "| 26 [18, 35] |"),
 ]
 
 # Numbers of the lessons that are not measurements: derived in the text or by a cell of the
