@@ -651,23 +651,35 @@ def course_release(solutions: Path | None, lessons: Path | None, check: bool,
 @click.option("--leaderboard", type=click.Path(dir_okay=False, path_type=Path), default=None,
               help="Also write a Markdown table of the students' own agents (lesson 13), "
                    "verified done % first.")
+@click.option("--reviews", type=click.Path(exists=True, dir_okay=False, path_type=Path),
+              default=None,
+              help="The instructor's points for written answers: a CSV with the columns "
+                   "student, exercise, points (and comment); <out stem>_reviews.csv is one "
+                   "to fill in.")
 def course_grade(submissions: Path, out: Path, tests: Path | None, timeout: float,
-                 jobs: int, leaderboard: Path | None) -> None:
-    """Grade SUBMISSIONS/<student>/ notebook folders; one CSV row of points per student."""
+                 jobs: int, leaderboard: Path | None, reviews: Path | None) -> None:
+    """Grade SUBMISSIONS/<student>/ notebook folders; one CSV row of points per student.
+
+    Written answers earn no automatic points: those long enough await the instructor's
+    review (their points are pending) until a --reviews file gives them."""
     from dlo_course.grading.grade import grade, leaderboard_markdown
     from dlo_course.grading.notebooks import GRADING_TESTS_DIR
 
     try:
-        rows = grade(submissions, out, tests or GRADING_TESTS_DIR, timeout=timeout, jobs=jobs)
+        rows = grade(submissions, out, tests or GRADING_TESTS_DIR, timeout=timeout, jobs=jobs,
+                     reviews=reviews)
     except (ValueError, FileNotFoundError) as err:
         raise click.ClickException(str(err)) from err
     for row in rows:
         note = f"  ({row['error']})" if row["error"] else ""
-        click.echo(f"{row['student']}: {row['total']:g} / {row['max_total']:g}{note}")
+        waiting = f", {row['pending']:g} awaiting review" if row["pending"] else ""
+        click.echo(f"{row['student']}: {row['total']:g} / {row['max_total']:g}{waiting}{note}")
     logs = out.parent / f"{out.stem}_logs"
     feedback = out.parent / f"{out.stem}_feedback"
+    to_review = out.parent / f"{out.stem}_reviews.csv"
     click.echo(f"wrote {out} (the grader's output for each student: {logs}; a feedback sheet "
-               f"for each student: {feedback})")
+               f"for each student: {feedback}; the written answers to review, to fill in and "
+               f"pass back with --reviews: {to_review})")
     if leaderboard is not None:
         leaderboard.parent.mkdir(parents=True, exist_ok=True)
         leaderboard.write_text(leaderboard_markdown(rows), encoding="utf-8")

@@ -424,12 +424,14 @@ def exercises_markdown(root: Path = REPO_ROOT) -> str:
 
 
 def course_size_markdown(root: Path = REPO_ROOT) -> str:
-    """The course's totals: exercises and written answers, and their points."""
+    """The course's totals: exercises and written answers, and their points (the grader's
+    and the instructor's: no pattern gives a written answer points)."""
     items = [item for _, lesson, _ in _graded_items(root) for item in lesson]
     code = [p for _, p, kind in items if kind == "code"]
     text = [p for _, p, kind in items if kind == "text"]
-    return (f"{len(code)} exercises ({sum(code)} points) and {len(text)} written answers "
-            f"({sum(text)} points): {sum(code) + sum(text)} points.\n")
+    return (f"{len(code)} exercises ({sum(code)} points, graded automatically) and "
+            f"{len(text)} written answers ({sum(text)} points, given by the instructor): "
+            f"{sum(code) + sum(text)} points.\n")
 
 
 BLOCKS: dict[str, Callable[[Path], str]] = {

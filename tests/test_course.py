@@ -24,7 +24,7 @@ from dlo_course.cli import main
 from dlo_course.grading import bundle as bundle_module
 from dlo_course.grading import notebooks
 from dlo_course.grading.bundle import STUDENT_EXCLUDE, release_student
-from dlo_course.grading.grade import grade, grading_command
+from dlo_course.grading.grade import PENDING, grade, grading_command
 from dlo_course.paths import AGENTS_DIR
 from dlo_course.submission import CSV_COLUMNS
 from user_env import use_user_environment
@@ -80,6 +80,11 @@ def handed_in_run(handed_in: Path) -> tuple[int, int]:
 
 def catalog() -> dict[str, int]:
     return {e["exercise"]: e["points"] for e in notebooks.exercises(SOLUTIONS)}
+
+
+def written() -> set[str]:
+    """The course's written answers: no pattern gives their points (issue 51)."""
+    return {e["exercise"] for e in notebooks.exercises(SOLUTIONS) if e["kind"] == "text"}
 
 
 # ------------------------------------------------------------------ the course's shape
@@ -211,10 +216,17 @@ def test_grader_gives_full_points_to_the_solutions(tmp_path, handed_in):
     graded = {e["exercise"]: e for e in report["exercises"]}
     assert {name: e["points"] for name, e in graded.items()} == catalog(), \
         "every exercise needs a grading test, with the points of its notebook metadata"
-    failed = [name for name, e in graded.items() if e["outcome"] != "passed"]
+    failed = [name for name, e in graded.items() if e["outcome"] != "passed"
+              and name not in written()]
     assert not failed, report["output"][-5000:]
-    assert report["total"] == report["max_total"] == sum(catalog().values())
-    assert "TOTAL" in report["output"]
+    # the solutions' notes are written answers like any other: the instructor's to review
+    awaiting = {name for name, e in graded.items() if e["outcome"] == "awaiting review"
+                and e["earned"] == 0 and e["pending"] == e["points"]}
+    assert awaiting == written(), report["output"][-5000:]
+    pending = sum(catalog()[name] for name in written())
+    assert report["pending"] == pending
+    assert report["total"] == report["max_total"] - pending == sum(catalog().values()) - pending
+    assert "TOTAL" in report["output"] and "await the instructor's review" in report["output"]
 
 
 def test_grader_fails_every_exercise_of_the_untouched_lessons(tmp_path):
@@ -292,17 +304,20 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
               if e["notebook"].startswith(SUBMITTED_LESSONS)}
     assert list(rows) == ["alice", "bob"]
     alice = rows["alice"]
-    for name, value in points.items():
-        assert float(alice[name]) == (value if name in handed else 0), f"alice's {name}"
+    for name, value in points.items():  # a written answer handed in awaits review
+        expected = (PENDING if name in written() else str(value)) if name in handed else "0"
+        assert alice[name] == expected, f"alice's {name}"
     assert float(alice["max_total"]) == sum(points.values())
-    assert float(alice["total"]) == sum(points[n] for n in handed)
+    assert float(alice["total"]) == sum(points[n] for n in handed - written())
+    assert float(alice["pending"]) == sum(points[n] for n in handed & written())
+    assert set(alice["awaiting_review"].split()) == handed & written()
     bob = rows["bob"]
     lost = {"bellman_target", "discounted_return", "critic_loss", "RingBuffer", "prediction_ring",
             "own_agent_report", "pendulum_agent"} | (set(points) - handed)
     for name, value in points.items():
-        expected = 0 if name in lost else value
-        assert float(bob[name]) == expected, f"bob's {name}: {bob[name]}, expected {expected}"
-    assert float(bob["total"]) == sum(points.values()) - sum(points[n] for n in lost)
+        expected = "0" if name in lost else PENDING if name in written() else str(value)
+        assert bob[name] == expected, f"bob's {name}: {bob[name]}, expected {expected}"
+    assert float(bob["total"]) == sum(points.values()) - sum(points[n] for n in lost | written())
 
 
 def test_written_answers_are_released_as_placeholders():
@@ -343,9 +358,10 @@ CAPSTONE = "13_capstone_table_one"
 
 
 def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, handed_in):
-    """Grading a class records each written answer verbatim in the CSV (points for presence
-    and length only) and writes one Markdown feedback sheet per student: points per
-    exercise and the failing check's message, without tracebacks."""
+    """Grading a class records each written answer verbatim in the CSV (no points of its own:
+    awaiting the instructor's review if long enough, 0 if not) and writes one Markdown
+    feedback sheet per student: points per exercise and the failing check's message, without
+    tracebacks."""
     catalog_dir = tmp_path / "catalog"
     catalog_dir.mkdir()
     (catalog_dir / f"{CAPSTONE}.ipynb").write_bytes((SOLUTIONS / f"{CAPSTONE}.ipynb").read_bytes())
@@ -381,18 +397,22 @@ def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, 
         graded = [e for e in notebooks.exercises(catalog_dir)]
         texts = [e["exercise"] for e in graded if e["kind"] == "text"]
         assert reader.fieldnames == ["student", *[e["exercise"] for e in graded], "total",
-                                     "max_total", "error", *CSV_COLUMNS,
+                                     "max_total", "pending", "awaiting_review", "error",
+                                     *CSV_COLUMNS,
                                      *[f"{t}_{part}" for t in texts
                                                              for part in ("text", "rubric")]]
         csv_rows = {row["student"]: row for row in reader}
     alice, bob, carol = csv_rows["alice"], csv_rows["bob"], csv_rows["carol"]
     points = {e["exercise"]: e["points"] for e in graded}
-    assert float(alice["total"]) == float(alice["max_total"]) == sum(points.values())
+    assert float(alice["max_total"]) == sum(points.values())
+    assert float(alice["total"]) == sum(points.values()) - sum(points[t] for t in texts)
+    assert float(alice["pending"]) == sum(points[t] for t in texts)
+    assert set(alice["awaiting_review"].split()) == set(texts)
     for name in texts:  # the instructor's notes, as the student's notebook holds them
         assert alice[f"{name}_text"] == notebooks.written_answers(
             SOLUTIONS / f"{CAPSTONE}.ipynb")[name]["text"]
     assert bob["analysis_next_step_text"] == essay  # verbatim: newline, quotes, commas
-    assert float(bob["analysis_next_step"]) == points["analysis_next_step"]
+    assert bob["analysis_next_step"] == PENDING and bob["awaiting_review"] == "analysis_next_step"
     assert bob["prediction_cells_text"] == "Six." and float(bob["prediction_cells"]) == 0
     assert bob["analysis_comparison_text"] == "" and float(bob["analysis_comparison"]) == 0
     # the hand-in: alice's agent, measured by the grader, her report verified; bob's absent
@@ -562,8 +582,8 @@ def test_grading_a_class_gives_the_right_csv(tmp_path):
              if e["kind"] == "text" for part in ("text", "rubric")]
     with out.open(newline="") as f:
         reader = csv.DictReader(f)
-        assert reader.fieldnames == ["student", *catalog(), "total", "max_total", "error",
-                                     *CSV_COLUMNS, *texts]
+        assert reader.fieldnames == ["student", *catalog(), "total", "max_total", "pending",
+                                     "awaiting_review", "error", *CSV_COLUMNS, *texts]
         rows = {row["student"]: row for row in reader}
     assert list(rows) == sorted(expected)
     for student, points in expected.items():

@@ -1,7 +1,9 @@
 """The mutation suite (issue 13): for every exercise, plausible wrong answers (the solution
 with one mistake a student could make) must score 0, and the solution full marks. A few
 mutants break only an exercise's secondary requirement and must get exactly its partial
-credit.
+credit. A written answer's mutants that are there and long enough, wrong or vacuous, earn
+nothing either, but await the instructor's review (:data:`AWAITS`): no pattern gives a
+written answer points (issue 51).
 
 Round k of a notebook grades a copy of that solution notebook in which every exercise carries
 its k-th mutant, with the real grader (that notebook's grading test file) in a subprocess, so
@@ -21,7 +23,7 @@ import pytest
 
 from dlo_course.grading import notebooks
 from dlo_course.grading.grade import grading_command
-from test_rubric import WRONG_ANSWERS  # long answers that miss a criterion of their rubric
+from test_rubric import VACUOUS, WRONG_ANSWERS  # long answers, wrong or vacuous
 
 REPO = Path(__file__).resolve().parents[1]
 SOLUTIONS = REPO / "solutions"
@@ -45,6 +47,7 @@ _ALLREDUCE = ("    flat = torch.cat([p.grad.reshape(-1) for p in params]).numpy(
 
 # a written answer's mutants replace the whole answer (the cell but its first-line comment)
 WHOLE_ANSWER = "<the whole answer>"
+AWAITS = "awaiting review"  # expected of a long written answer: no points, all of them pending
 
 # exercise -> [(the mistake, text of the solution, replaced by[, points expected])]
 MUTANTS: dict[str, list[tuple]] = {
@@ -62,10 +65,11 @@ MUTANTS: dict[str, list[tuple]] = {
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "They will overlap, I think."),
         ("an outcome, long, with no reason from the interval's width", WHOLE_ANSWER,
-         WRONG_ANSWERS["prediction_seeds"][0], 0.5)],
+         WRONG_ANSWERS["prediction_seeds"][0], AWAITS)],
     "prediction_sweeps": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
-        ("too short", WHOLE_ANSWER, "Five sweeps, I think.")],
+        ("too short", WHOLE_ANSWER, "Five sweeps, I think."),
+        ("issue 51's vacuous sentence (a digit and 'as')", WHOLE_ANSWER, VACUOUS, AWAITS)],
     "RingBuffer": [
         ("off-by-one size", "min(self._size + 1, self.capacity)", "min(self._size + 1, self.capacity - 1)"),
         ("samples empty rows", "self.rng.integers(0, self._size,", "self.rng.integers(0, self.capacity,"),
@@ -232,7 +236,7 @@ MUTANTS: dict[str, list[tuple]] = {
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "In all six cells."),
         ("a count, long, with no reason that names what decides a verdict", WHOLE_ANSWER,
-         WRONG_ANSWERS["prediction_verdicts"][0], 0.5)],
+         WRONG_ANSWERS["prediction_verdicts"][0], AWAITS)],
     "adam_step": [
         ("no bias correction", "m_hat = m / (1 - beta1**t)", "m_hat = m"),
         ("eps inside the square root", "(np.sqrt(v_hat) + eps)", "np.sqrt(v_hat + eps)"),
@@ -249,7 +253,7 @@ MUTANTS: dict[str, list[tuple]] = {
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "About ten percent."),
         ("a share, long, with no reason why a copy succeeds", WHOLE_ANSWER,
-         WRONG_ANSWERS["prediction_successes"][0], 0.5)],
+         WRONG_ANSWERS["prediction_successes"][0], AWAITS)],
     "jacobian_from_probes": [
         ("J transposed", "    return transposed.T\n", "    return transposed\n"),
         ("each probe taken as one axis (finite differences of the diagonal only)",
@@ -337,33 +341,35 @@ MUTANTS: dict[str, list[tuple]] = {
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "The agent wins."),
         ("neither an outcome nor a reason", WHOLE_ANSWER,
-         "I will run the cell first and then read what the table says about both methods.")],
+         "I will run the cell first and then read what the table says about both methods.",
+         AWAITS)],
     "prediction_robustness": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "The noise."),
         ("neither an outcome nor a reason", WHOLE_ANSWER,
-         "I would rather wait for the benchmark to tell me what happens in each of the worlds.")],
+         "I would rather wait for the benchmark to tell me what happens in each of the worlds.",
+         AWAITS)],
     "prediction_cells": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "About six cells."),
         ("a number, long, with no reason from the agents, goals or episodes", WHOLE_ANSWER,
-         WRONG_ANSWERS["prediction_cells"][1], 0.5)],
+         WRONG_ANSWERS["prediction_cells"][1], AWAITS)],
     "prediction_factor": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "The threshold."),
         ("a factor, long, with no mechanism", WHOLE_ANSWER,
-         WRONG_ANSWERS["prediction_factor"][1], 0.5)],
+         WRONG_ANSWERS["prediction_factor"][1], AWAITS)],
     "analysis_comparison": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "Ours are worse than the paper's in most cells, because "
          "they were trained on far fewer transitions."),
         ("long, with no source, numbers, intervals or cells", WHOLE_ANSWER,
-         WRONG_ANSWERS["analysis_comparison"][0])],
+         WRONG_ANSWERS["analysis_comparison"][0], AWAITS)],
     "analysis_next_step": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("empty", WHOLE_ANSWER, ""),
         ("long, an experiment unrelated to the evidence", WHOLE_ANSWER,
-         WRONG_ANSWERS["analysis_next_step"][0])],
+         WRONG_ANSWERS["analysis_next_step"][0], AWAITS)],
     "seed_interval": [
         ("population standard deviation", "values.std(axis=axis, ddof=1)", "values.std(axis=axis)"),
         ("normal quantile for t", "half = T_975[n - 1] *", "half = 1.96 *"),
@@ -439,8 +445,15 @@ def test_mutants_score_zero(stem, k, tmp_path):
     proc = subprocess.run(grading_command(tmp_path / "student", tests, json_out=out),
                           cwd=REPO, env=env, capture_output=True, text=True, timeout=900)
     assert out.is_file(), f"no grades written\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
-    earned = {e["exercise"]: e["earned"] for e in json.loads(out.read_text())["exercises"]}
-    wrong = {name: (mutant[0], earned[name]) for name, mutant in applied.items()
-             if earned[name] != (mutant[3] if len(mutant) > 3 else 0)}
-    assert not wrong, f"mutants that scored (or missed their partial credit): {wrong}\n" \
-                      f"{proc.stdout[-4000:]}"
+    grades = {e["exercise"]: e for e in json.loads(out.read_text())["exercises"]}
+
+    def as_expected(entry, expected):
+        if expected == AWAITS:
+            return entry["earned"] == 0 and entry.get("pending") == entry["points"]
+        return entry["earned"] == expected and not entry.get("pending")
+
+    wrong = {name: (mutant[0], grades[name]["earned"], grades[name]["outcome"])
+             for name, mutant in applied.items()
+             if not as_expected(grades[name], mutant[3] if len(mutant) > 3 else 0)}
+    assert not wrong, f"mutants that scored (or missed their partial credit or review): " \
+                      f"{wrong}\n{proc.stdout[-4000:]}"

@@ -12,6 +12,8 @@ One idea per module:
 * :mod:`~dlo_course.grading.grade`: grading one folder (a pytest run of ``tests/grading``)
   and a class (the CSV);
 * :mod:`~dlo_course.grading.feedback`: a student's feedback sheet;
+* :mod:`~dlo_course.grading.reviews`: the instructor's points for written answers, which no
+  pattern gives (the reviews file of ``course grade``);
 * :mod:`~dlo_course.grading.sandbox`: the sandbox server, its forked workers and the
   grader's side, :class:`~dlo_course.grading.sandbox.Sandbox`;
 * :mod:`~dlo_course.grading.data`: the plain data the sandbox sends back (JSON, no code);

@@ -15,11 +15,14 @@ from typing import Any, Iterable
 
 from dlo_course.grading.feedback import feedback_markdown, rubric_summary
 from dlo_course.grading.notebooks import GRADING_TESTS_DIR, SOLUTIONS_DIR, exercises
+from dlo_course.grading.reviews import apply_reviews, read_reviews, review_rows, write_review_file
 from dlo_course.grading.runner import ExerciseError, find_notebook
 from dlo_course.paths import REPO_ROOT
 from dlo_course.submission import CSV_COLUMNS, SUBMISSION_DIR, csv_fields
 
 OWN_AGENT_ITEM, OWN_AGENT_NOTEBOOK = "own_agent_report", "13_capstone_table_one"
+PENDING = "pending"  # the class CSV's points of a written answer awaiting the instructor's review
+SUMMARY_COLUMNS = ("total", "max_total", "pending", "awaiting_review", "error")
 
 
 def grading_command(notebooks: str | Path, tests: str | Path = GRADING_TESTS_DIR,
@@ -49,8 +52,9 @@ def grade_folder(notebooks: str | Path, tests: str | Path = GRADING_TESTS_DIR,
     compute in MPI processes (:data:`REFERENCE_CACHE_VARIABLE`); None: each computes its own.
 
     Returns:
-        The grader's JSON report (``exercises``: notebook, exercise, points, earned, outcome;
-        ``total``, ``max_total``), plus ``returncode``, ``output`` (pytest's text) and
+        The grader's JSON report (``exercises``: notebook, exercise, points, earned, outcome,
+        and for a written answer awaiting review its ``pending`` points; ``total``,
+        ``max_total``), plus ``returncode``, ``output`` (pytest's text) and
         ``error`` (None, or why there is no report).
     """
     with tempfile.TemporaryDirectory() as tmp:
@@ -78,35 +82,50 @@ def grade_folder(notebooks: str | Path, tests: str | Path = GRADING_TESTS_DIR,
 
 def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_TESTS_DIR,
           timeout: float = 1800, catalog: str | Path = SOLUTIONS_DIR,
-          progress: bool = True, jobs: int = 1) -> list[dict[str, Any]]:
+          progress: bool = True, jobs: int = 1,
+          reviews: str | Path | None = None) -> list[dict[str, Any]]:
     """Grade every student folder in ``submissions`` and write one CSV row per student.
 
     Each sub-folder of ``submissions`` is one student (its name is the student's id) and holds
     that student's notebooks. Columns: ``student``, one column of points per exercise and
-    written answer (in the order of the course), ``total``, ``max_total``, ``error`` (empty
-    when grading ran), the student's own agent as handed in with lesson 13, when it is
+    written answer (in the order of the course; :data:`PENDING` for a written answer that
+    awaits the instructor's review), ``total`` (the points given so far), ``max_total``,
+    ``pending`` (the points of the written answers awaiting review), ``awaiting_review``
+    (their names, separated by spaces), ``error`` (empty when grading ran), the student's own
+    agent as handed in with lesson 13, when it is
     graded (:data:`dlo_course.submission.CSV_COLUMNS`: what the grader measured of the
     handed-in actor, whether the report says so, and what the report claims of its training
     run; empty when absent),
     then one column ``<answer>_text`` per written answer holding what the
-    student wrote, verbatim, each followed by ``<answer>_rubric``: the criteria of its rubric
-    met, e.g. ``1/2 met; missing: gives a reason`` (empty without a rubric).
+    student wrote, verbatim, each followed by ``<answer>_rubric``: which criteria of its rubric
+    have their patterns in the answer, a hint for the reviewer and never points
+    (:func:`rubric_summary`; empty without a rubric).
+
+    No pattern gives a written answer points (:mod:`dlo_course.grading.reviews`): the
+    instructor's ``reviews`` file does, merged into the columns, the totals and the feedback
+    sheets. ``<out stem>_reviews.csv`` beside the CSV lists every written answer to review,
+    with the points already given: fill it in and pass it as ``reviews``.
 
     Beside the CSV: ``<out stem>_logs/<student>.txt``, the grader's full output, and
     ``<out stem>_feedback/<student>.md``, a feedback sheet for the student: the points of
-    every exercise and, for each one that lost points, the failing check's message
-    (:func:`feedback_markdown`).
+    every exercise, the written answers awaiting review and, for each one that lost points,
+    the failing check's message (:func:`feedback_markdown`).
 
     Args:
         catalog: folder whose notebooks list the exercises (the solutions), so every student
             gets every column even if their notebook is missing.
         jobs: students graded at the same time (each by its own processes).
+        reviews: the instructor's points for written answers (a CSV: ``student``,
+            ``exercise``, ``points``, optional ``comment``), checked before any grading.
     """
     submissions, out = Path(submissions), Path(out)
     students = sorted(p for p in submissions.iterdir() if p.is_dir() and not p.name.startswith("."))
     if not students:
         raise FileNotFoundError(f"no student folders in {submissions}")
     known = exercises(catalog) if Path(catalog).is_dir() else []
+    written = {e["exercise"]: e["points"] for e in known if e.get("kind") == "text"}
+    reviewed = read_reviews(reviews, [p.name for p in students], written or None) \
+        if reviews is not None else {}
     columns = [e["exercise"] for e in known]
     texts = [e["exercise"] for e in known if e.get("kind") == "text"]
     logs = out.parent / f"{out.stem}_logs"
@@ -132,20 +151,28 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
                 reports[futures[future]] = _failed_report(err)
             bar.set_postfix(last=students[futures[future]].name)
             bar.update(1)
-    rows = []
+    rows, to_review = [], []
     for student, report in zip(students, reports):
         (logs / f"{student.name}.txt").write_text(str(report.get("output", "")),
                                                    encoding="utf-8", errors="replace")
         if not _well_formed(report):
             report = _failed_report(ValueError("the grader's report of this student is "
                                                "malformed"), report.get("output", ""))
-        earned = {e["exercise"]: e["earned"] for e in report["exercises"]}
+        problems = [report["error"]] if report["error"] else []
+        problems += [f"the review of {name} is not applied: the answer was not graded"
+                     for name in apply_reviews(report, student.name, reviewed)]
+        earned = {e["exercise"]: PENDING if e.get("pending") else e["earned"]
+                  for e in report["exercises"]}
+        awaiting = [e["exercise"] for e in report["exercises"] if e.get("pending")]
         columns += [name for name in earned if name not in columns]
         texts += [e["exercise"] for e in report["exercises"]
                   if "text" in e and e["exercise"] not in texts]
         max_total = sum(e["points"] for e in known) if known else report["max_total"]
         row = {"student": student.name, **earned, "total": report["total"],
-               "max_total": max_total, "error": report["error"] or ""}
+               "max_total": max_total,
+               "pending": sum(e.get("pending", 0) for e in report["exercises"]),
+               "awaiting_review": " ".join(awaiting), "error": "; ".join(problems)}
+        to_review += review_rows(student.name, report)
         row.update({f"{e['exercise']}_text": e["text"] for e in report["exercises"]
                     if "text" in e})
         row.update({f"{e['exercise']}_rubric": rubric_summary(e["rubric"])
@@ -161,14 +188,15 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     text_columns = [f"{name}_{part}" for name in texts for part in ("text", "rubric")]
     own_columns = list(CSV_COLUMNS) if OWN_AGENT_ITEM in columns else []  # lesson 13 graded
     with out.open("w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, fieldnames=["student", *columns, "total", "max_total",
-                                               "error", *own_columns, *text_columns])
+        writer = csv.DictWriter(f, fieldnames=["student", *columns, *SUMMARY_COLUMNS,
+                                               *own_columns, *text_columns])
         writer.writeheader()
         for row in rows:
             writer.writerow({c: row.get(c, 0) for c in columns}
                             | {c: row.get(c, "") for c in text_columns}
-                            | {k: row[k] for k in ("student", "total", "max_total", "error")}
+                            | {k: row[k] for k in ("student", *SUMMARY_COLUMNS)}
                             | {c: row.get(c, "") for c in own_columns})
+    write_review_file(out.parent / f"{out.stem}_reviews.csv", to_review)
     return rows
 
 
@@ -187,6 +215,7 @@ def _well_formed(report: Any) -> bool:
     return isinstance(items, list) and all(
         isinstance(e, dict) and isinstance(e.get("exercise"), str)
         and isinstance(e.get("earned"), (int, float)) and isinstance(e.get("points"), (int, float))
+        and isinstance(e.get("pending", 0), (int, float))
         for e in items) and isinstance(report.get("total"), (int, float))
 
 
@@ -268,5 +297,8 @@ def summary_lines(items: Iterable[dict[str, Any]]) -> list[str]:
                      f"{item['points']:<3g} {mark}")
     total = sum(i["earned"] for i in items)
     max_total = sum(i["points"] for i in items)
-    lines.append(f"TOTAL {total:g} / {max_total:g} points")
+    pending = sum(i.get("pending", 0) for i in items)
+    lines.append(f"TOTAL {total:g} / {max_total:g} points" + (
+        f" ({pending:g} points of written answers await the instructor's review)"
+        if pending else ""))
     return lines

@@ -17,20 +17,22 @@ Conventions (nbgrader's, kept deliberately small):
   {"answer": NAME, "points": N, "min_words": W}`` and starts with the comment
   ``<!-- answer: NAME (N points, at least W words) -->`` (the fallback, as for exercises).
   The solution's cell holds notes for the instructor; releasing keeps only the comment and
-  :data:`ANSWER_PLACEHOLDER`. It is recorded verbatim in the class CSV, for the instructor
-  to read, and gets no points if it is missing or shorter than W words
-  (:func:`written_answer_problem`).
+  :data:`ANSWER_PLACEHOLDER`. **No pattern gives its points**: an answer that is missing or
+  shorter than W words gets none (:func:`written_answer_problem`), said to the student; any
+  other answer *awaits the instructor's review*, its points pending, and is recorded
+  verbatim in the class CSV, where the instructor's points enter through a reviews file
+  (:mod:`dlo_course.grading.reviews`). A keyword cannot tell "As I have not run the cell
+  yet, I cannot say 1 thing about it here." from a prediction; a reader can.
 * A written answer may carry a **rubric**: ``"rubric": [{"criterion": "<one line the
   instructor and the student read>", "patterns": ["<case-insensitive Python regex>", ...]},
-  ...]`` in the same metadata. A criterion is met when any of its patterns matches the answer
-  (``re.search``, ignoring case); a long enough answer then earns points x (criteria met /
-  criteria) (:func:`written_answer_score`), and without a rubric all its points. Criteria
-  should reward substance, not keywords: "commits to a number" (``\\d``), "gives a reason"
-  (``\\bbecause\\b|\\bsince\\b``). Releasing keeps the rubric in the lesson's cell and lists the
-  criteria under the placeholder (:data:`RUBRIC_PREFIX` ``(1) ...; (2) ...``), so the student
-  sees what a good answer covers; the solution's notes should still say what it contains.
-  A malformed rubric fails the release and the grading (:func:`check_rubric`);
-  ``dlo-course course rubrics`` prints every rubric for the instructor.
+  ...]`` in the same metadata: the checklist the instructor reviews the answer against.
+  Releasing keeps the rubric in the lesson's cell and lists the criteria under the
+  placeholder (:data:`RUBRIC_PREFIX` ``(1) ...; (2) ...``), so the student sees what a good
+  answer covers. The patterns (``re.search``, ignoring case: :func:`rubric_met`) earn
+  nothing: the class CSV shows which criteria's patterns occur in an answer, as a hint for
+  the reader ("no number found"), never as points. A malformed rubric fails the release and
+  the grading (:func:`check_rubric`); ``dlo-course course rubrics`` prints every rubric for
+  the instructor.
 * **Setup** cells (tag ``setup`` in ``cell.metadata["tags"]``) hold what the exercises need
   (imports, constants). The grader runs only the setup cells and the exercise cells, in a fresh
   namespace, so it never waits for a simulation or a training run of the notebook.
@@ -220,8 +222,8 @@ def count_words(text: str) -> int:
 
 
 def written_answer_problem(text: str, min_words: int) -> str | None:
-    """Why a written answer gets no points (None: it is there and long enough, and its rubric,
-    if any, decides: :func:`written_answer_score`)."""
+    """Why a written answer gets no points (None: it is there and long enough, and awaits the
+    instructor's review)."""
     words = count_words(text)
     if words == 0:
         return f"no answer written: replace {ANSWER_PLACEHOLDER!r} with your own words"
@@ -233,21 +235,9 @@ def written_answer_problem(text: str, min_words: int) -> str | None:
 
 def rubric_met(text: str, rubric: list[dict[str, Any]]) -> list[bool]:
     """For each criterion of ``rubric``: does any of its patterns occur in ``text``
-    (``re.search``, ignoring case)?"""
+    (``re.search``, ignoring case)? A hint for the instructor who reviews the answer, never
+    its points: a digit and "as" are not a prediction."""
     return [any(re.search(p, text, re.IGNORECASE) for p in item["patterns"]) for item in rubric]
-
-
-def written_answer_score(text: str, min_words: int,
-                         rubric: list[dict[str, Any]] | None = None) -> float:
-    """The share of its points a written answer earns, in [0, 1]: 0 if it is missing or too
-    short (:func:`written_answer_problem`), else the share of the rubric's criteria it meets
-    (1 without a rubric)."""
-    if written_answer_problem(text, min_words) is not None:
-        return 0.0
-    if not rubric:
-        return 1.0
-    met = rubric_met(text, rubric)
-    return sum(met) / len(met)
 
 
 def rubric_line(rubric: list[dict[str, Any]]) -> str:
@@ -259,8 +249,11 @@ def rubric_line(rubric: list[dict[str, Any]]) -> str:
 
 def rubrics_markdown(folder: str | Path = SOLUTIONS_DIR) -> str:
     """Every written answer of the notebooks in ``folder`` with its points, minimum length
-    and rubric (criteria and patterns), as Markdown for the instructor."""
-    lines = [f"# Written answers and their rubrics ({Path(folder).name}/)", ""]
+    and rubric (the criteria to review it against, and the patterns the class CSV reports
+    as hints), as Markdown for the instructor."""
+    lines = [f"# Written answers and their rubrics ({Path(folder).name}/)", "",
+             "The instructor gives a written answer's points (reviews file of `dlo-course "
+             "course grade`); the patterns only hint at what an answer contains.", ""]
     for path in notebooks_in(folder):
         answers = written_answers(path)
         if not answers:
@@ -268,8 +261,8 @@ def rubrics_markdown(folder: str | Path = SOLUTIONS_DIR) -> str:
         lines += [f"## {path.stem}", ""]
         for name, info in answers.items():
             points = f"{info['points']} point{'s' if info['points'] != 1 else ''}"
-            lines.append(f"- `{name}`: {points}, at least {info['min_words']} words"
-                         + ("" if info["rubric"] else "; no rubric: all points if long enough"))
+            lines.append(f"- `{name}`: {points}, at least {info['min_words']} words, "
+                         "reviewed by the instructor" + ("" if info["rubric"] else "; no rubric"))
             for number, item in enumerate(info["rubric"], start=1):
                 patterns = ", ".join(f"`{p}`" for p in item["patterns"])
                 lines.append(f"  {number}. {item['criterion']} (any of: {patterns})")

@@ -40,6 +40,7 @@ GRADING_DIR = Path(__file__).resolve().parent
 REPO_ROOT = GRADING_DIR.parents[1]
 DEFAULT_TIMEOUT = float(os.environ.get("DLO_COURSE_GRADING_TIMEOUT", 60))  # s per exercise
 _GRADES: dict[str, dict] = {}  # test node id -> notebook, exercise, points, outcome, earned
+AWAITING_REVIEW = "awaiting review"  # the outcome of a written answer whose points are pending
 
 
 def pytest_addoption(parser):
@@ -133,14 +134,15 @@ def pytest_runtest_logreport(report):
         elif " (not loaded):" in text:
             record["outcome"] = "not loaded"
         record["earned"] = 0
-        if report.when == "call" and record.get("share"):  # a rubric partly met
-            record["outcome"] = "partly met"
-            record["earned"] = record["points"] * record["share"]
         if not record.get("message"):  # the first failure says the most
             crash = getattr(report.longrepr, "reprcrash", None)
             record["message"] = crash.message if crash is not None else str(report.longrepr)
     elif report.skipped:
         record["outcome"], record["earned"] = "skipped", 0
+    elif report.when == "call" and record["outcome"] == "not run" and record.get("review"):
+        # a written answer that is there: its points are the instructor's, not a pattern's
+        record["outcome"], record["earned"] = AWAITING_REVIEW, 0
+        record["pending"] = record["points"]
     elif report.when == "call" and record["outcome"] == "not run":
         record["outcome"], record["earned"] = "passed", record["points"]
 
@@ -150,7 +152,9 @@ def _grade_items() -> list[dict]:
     merged: dict[tuple[str, str], dict] = {}
     for record in _GRADES.values():
         key = (record["notebook"], record["exercise"])
-        entry = merged.setdefault(key, {**record, "earned": 0, "points": 0, "outcomes": []})
+        entry = merged.setdefault(key, {**{k: v for k, v in record.items()
+                                           if k not in ("pending", "review")},
+                                        "earned": 0, "points": 0, "outcomes": []})
         entry["points"] += record["points"]
         entry["earned"] += record["earned"]
         entry["outcomes"].append(record["outcome"])
@@ -159,6 +163,8 @@ def _grade_items() -> list[dict]:
         for key in ("text", "rubric", "measured"):
             if key in record:
                 entry[key] = record[key]
+        if "pending" in record:
+            entry["pending"] = entry.get("pending", 0) + record["pending"]
     items = []
     for entry in merged.values():
         outcomes = entry.pop("outcomes")
@@ -181,6 +187,7 @@ def pytest_terminal_summary(terminalreporter, exitstatus, config):
     if out:
         report = {"notebooks": str(notebooks_dir(config)), "exercises": items,
                   "total": sum(i["earned"] for i in items),
+                  "pending": sum(i.get("pending", 0) for i in items),
                   "max_total": sum(i["points"] for i in items)}
         Path(out).write_text(json.dumps(report, indent=1) + "\n")
 
@@ -415,37 +422,30 @@ def student(request):
 class WrittenAnswer:
     """A written answer (a Markdown cell) of the student's notebook: its text, never run.
 
-    No points if it is missing or too short
-    (:func:`dlo_course.grading.notebooks.written_answer_problem`); else, with a rubric, the
-    share of its criteria met (:func:`dlo_course.grading.notebooks.written_answer_score`):
-    the test fails listing the criteria not met, and ``record["share"]`` makes that failure
-    earn its partial points (:func:`pytest_runtest_logreport`). The text, and which criteria
-    it met, go into the grades (``--grades-json``, the class CSV) for the instructor."""
+    No pattern gives it points. :meth:`check` fails, with no points, if it is missing or too
+    short (:func:`dlo_course.grading.notebooks.written_answer_problem`); otherwise it passes
+    and the answer *awaits the instructor's review*: ``record["review"]`` makes the pass earn
+    nothing yet, its points pending (:func:`pytest_runtest_logreport`), until the
+    instructor's reviews file gives them (:mod:`dlo_course.grading.reviews`). The text, and
+    which criteria of its rubric have patterns in it (a hint for the reader, not points), go
+    into the grades (``--grades-json``, the class CSV)."""
 
     def __init__(self, name: str, text: str, min_words: int, rubric=(), record=None):
         self.name, self.text, self.min_words = name, text, min_words
         self.rubric, self.record = list(rubric), record
 
     def check(self) -> None:
-        from dlo_course.grading.notebooks import (rubric_met, written_answer_problem,
-                                                  written_answer_score)
+        from dlo_course.grading.notebooks import rubric_met, written_answer_problem
 
-        met = rubric_met(self.text, self.rubric)
         if self.record is not None and self.rubric:
-            self.record["rubric"] = [{"criterion": item["criterion"], "met": ok}
-                                     for item, ok in zip(self.rubric, met)]
+            self.record["rubric"] = [{"criterion": item["criterion"], "patterns_found": found}
+                                     for item, found in zip(self.rubric,
+                                                            rubric_met(self.text, self.rubric))]
         problem = written_answer_problem(self.text, self.min_words)
         if problem:
             pytest.fail(f"{self.name}: {problem}", pytrace=False)
-        share = written_answer_score(self.text, self.min_words, self.rubric)
-        if share < 1:
-            if self.record is not None:
-                self.record["share"] = share
-            missing = "; ".join(f"({number}) {item['criterion']}"
-                                for number, (item, ok) in enumerate(zip(self.rubric, met), 1)
-                                if not ok)
-            pytest.fail(f"{self.name}: {sum(met)} of {len(met)} criteria met; your answer "
-                        f"does not yet show: {missing}", pytrace=False)
+        if self.record is not None:
+            self.record["review"] = True
 
 
 @pytest.fixture
