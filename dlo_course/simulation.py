@@ -11,9 +11,11 @@ Time per action, the one place where the paper's text and the authors' code disa
   of physics (20 sub-steps of 0.15 ms). The published numbers come from this setting.
 * ``time_mode="paper"``: the text says an action is integrated over 20 x 0.003 = 0.06 s. We run
   ``stepSimulation()`` 20 times per action with the same stable 0.15 ms sub-step, so one action
-  costs 20 times as much compute. (A single 0.06 s step with larger sub-steps is not an
-  option: PyBullet integrates the Neo-Hookean elastic forces explicitly, and at E = 2.5 MPa
-  sub-steps above about 0.3 ms explode.)
+  costs 20 times as much compute. (A single 0.06 s step with larger sub-steps is not the
+  same physics: PyBullet integrates the Neo-Hookean elastic forces explicitly, and at
+  E = 2.5 MPa the rod breaks above a sub-step of 0.6 to 1 ms, depending on the motion, and
+  moves differently well below it: lesson 05 and ``benchmarks/results/substep_bracket.md``,
+  made by :func:`main`.)
 
 In both modes the *commanded* tip displacement per action is the same, a * v_max * 0.06 s;
 only the physics time the rod gets to follow it differs.
@@ -67,7 +69,7 @@ with quiet_c_stdout():
     import pybullet as p
     import pybullet_data
 
-from dlo_course.mesh import make_rod_mesh, write_vtk
+from dlo_course.mesh import make_rod_mesh, read_vtk, write_vtk
 from dlo_course.paths import MESH_PATH
 
 TimeMode = Literal["code", "paper"]
@@ -626,3 +628,296 @@ def ensure_mesh(params: SimParams) -> Path:
     if not path.is_file():
         write_vtk(make_rod_mesh(params.length, params.radius), path)
     return path
+
+
+# ------------------------------------------------------------------ the sub-step bound
+# Lesson 05's stability protocol: push the tip sideways, hold it still, watch the rod. The
+# explicit elastic forces bound the sub-step; these functions bracket the bound on this rod.
+
+STABILITY_PUSH: tuple[float, float, float] = (0.0, 0.3, 0.0)
+"""The action of the protocol's push: the tip commanded 1.8 cm sideways per action."""
+STABILITY_PUSH_ACTIONS = 10
+"""Actions of the push; the tip is then held still (action 0)."""
+STABILITY_ACTIONS = 120
+"""Actions of one run of the protocol (360 ms of physics in the code's 3 ms per action)."""
+BRACKET_SUB_STEPS: tuple[int, ...] = (20, 10, 8, 6, 5, 4, 3, 2, 1)
+"""Sub-steps per action of the bracket, from the authors' 20 to one per action."""
+BROKEN_STRETCH = 3.0
+"""An edge longer than this many times its rest length: the rod has broken up, whether or not
+a node has flown far enough for :meth:`RodScene.is_unstable`. The motions that held stretched
+edges to less than 2 (a full-speed push) and the broken rods to dozens of times their length
+(``benchmarks/results/substep_bracket.md``)."""
+
+
+@dataclass
+class StabilityRun:
+    """One run of the stability protocol (:func:`stability_run`)."""
+
+    sub_steps: int
+    """Sub-steps per ``stepSimulation()`` call."""
+    time_step: float
+    """Seconds of one ``stepSimulation()`` call (its sub-step is ``time_step / sub_steps``)."""
+    physics_per_action: float
+    """Seconds of physics per action."""
+    actions: int
+    """Actions the run was asked for."""
+    spread: np.ndarray
+    """Farthest node from the tip (m) after each action, until the rod blew up."""
+    stretch: np.ndarray
+    """Largest edge length over its rest length after each action, until the rod blew up."""
+    blew_up_at: int | None
+    """The action (from 1) after which :meth:`RodScene.is_unstable` held; None: it never did."""
+    seconds: float
+    """Wall-clock seconds of the run."""
+    nodes: np.ndarray | None = None
+    """(actions run, 200, 3) node positions after each action, if asked for."""
+
+    @property
+    def sub_step(self) -> float:
+        """Seconds of one sub-step."""
+        return self.time_step / self.sub_steps
+
+    @property
+    def stable(self) -> bool:
+        """The rod neither blew up nor broke over the whole run."""
+        return self.broke_at is None
+
+    @property
+    def broke_at(self) -> int | None:
+        """The first action after which an edge was longer than ``BROKEN_STRETCH`` times its
+        rest length (or the rod blew up); None: never."""
+        over = np.flatnonzero(self.stretch > BROKEN_STRETCH)
+        return int(over[0]) + 1 if over.size else self.blew_up_at
+
+    def physics_time(self, action: int | None) -> float | None:
+        """Seconds of physics after ``action`` actions (None stays None)."""
+        return None if action is None else action * self.physics_per_action
+
+    def gap_to(self, reference: "StabilityRun") -> float:
+        """Largest distance (m) of any node from the same node of ``reference`` after the
+        same action, over the actions both ran (both need ``nodes``)."""
+        if self.nodes is None or reference.nodes is None:
+            raise ValueError("both runs need their nodes: stability_run(..., keep_nodes=True)")
+        n = min(len(self.nodes), len(reference.nodes))
+        return float(np.max(np.linalg.norm(self.nodes[:n] - reference.nodes[:n], axis=-1)))
+
+    def summary(self) -> str:
+        """One line: the sub-step and what became of the rod."""
+        head = (f"{self.sub_steps:2d} sub-step{'s' if self.sub_steps != 1 else ''} of "
+                f"{self.sub_step * 1000:.3g} ms")
+        if self.stable:
+            return (f"{head}: in one piece over {self.actions} actions (edges at most "
+                    f"{self.stretch.max():.2f} times their length)")
+        broke = f"broke after {self.physics_time(self.broke_at) * 1000:.0f} ms"
+        if self.blew_up_at is None:
+            return f"{head}: {broke}, no node 5 m away within {self.actions} actions"
+        return (f"{head}: {broke}, blew up after "
+                f"{self.physics_time(self.blew_up_at) * 1000:.0f} ms of physics")
+
+
+def stability_run(sub_steps: int, actions: int = STABILITY_ACTIONS,
+                  push_actions: int = STABILITY_PUSH_ACTIONS, push=STABILITY_PUSH,
+                  params: SimParams | None = None, keep_nodes: bool = False) -> StabilityRun:
+    """Lesson 05's protocol at ``sub_steps`` sub-steps per action: a fresh scene, the tip pushed
+    with action ``push`` for ``push_actions`` actions and then held still, ``actions`` in all,
+    stopped when the rod blows up (:meth:`RodScene.is_unstable`). After each action it records
+    the farthest node from the tip and the largest edge stretch (length over rest length).
+
+    Args:
+        params: the scene (default :class:`SimParams`); its ``sub_steps`` is replaced.
+        keep_nodes: also keep every node position (for :meth:`StabilityRun.gap_to`).
+    """
+    params = (params or SimParams()).with_(sub_steps=int(sub_steps))
+    scene = RodScene(params)
+    try:
+        edges = read_vtk(scene.mesh_path).edges
+        rest = scene.node_positions()  # as loaded: the mesh at rest
+        rest_length = np.linalg.norm(rest[edges[:, 0]] - rest[edges[:, 1]], axis=1)
+        spread, stretch, kept, blew_up_at = [], [], [], None
+        start = time.perf_counter()
+        for k in range(actions):
+            action = np.asarray(push, dtype=np.float64) if k < push_actions else np.zeros(3)
+            scene.move_tip_to(scene.tip_target(action))
+            nodes = scene.node_positions()
+            if scene.is_unstable(nodes):
+                blew_up_at = k + 1
+                break
+            spread.append(np.max(np.linalg.norm(nodes - scene.tip_position(), axis=1)))
+            length = np.linalg.norm(nodes[edges[:, 0]] - nodes[edges[:, 1]], axis=1)
+            stretch.append(np.max(length / rest_length))
+            if keep_nodes:
+                kept.append(nodes)
+        seconds = time.perf_counter() - start
+    finally:
+        scene.close()
+    return StabilityRun(sub_steps=int(sub_steps), time_step=params.time_step,
+                        physics_per_action=params.physics_time_per_action, actions=actions,
+                        spread=np.asarray(spread), stretch=np.asarray(stretch),
+                        blew_up_at=blew_up_at, seconds=seconds,
+                        nodes=np.asarray(kept) if keep_nodes else None)
+
+
+def substep_bracket(sub_steps=BRACKET_SUB_STEPS, actions: int = STABILITY_ACTIONS,
+                    params: SimParams | None = None, keep_nodes: bool = False,
+                    report=None, **protocol) -> list[StabilityRun]:
+    """:func:`stability_run` at each number of ``sub_steps``, in order, in this process.
+
+    Args:
+        report: called with each run as it ends (``lambda run: print(run.summary())``).
+        protocol: ``push_actions`` and ``push`` of :func:`stability_run`.
+    """
+    runs = []
+    for n in sub_steps:
+        runs.append(stability_run(n, actions, params=params, keep_nodes=keep_nodes, **protocol))
+        if report is not None:
+            report(runs[-1])
+    return runs
+
+
+def bracket_bound(runs) -> tuple[StabilityRun | None, StabilityRun | None]:
+    """(the run with the largest sub-step that stayed in one piece, the run with the smallest
+    sub-step that broke): on this protocol the bound lies between their sub-steps. None where
+    no run stayed in one piece, or none broke."""
+    stable = [r for r in runs if r.stable]
+    broke = [r for r in runs if not r.stable]
+    return (max(stable, key=lambda r: r.sub_step, default=None),
+            min(broke, key=lambda r: r.sub_step, default=None))
+
+
+def _ms(seconds: float | None) -> str:
+    return "—" if seconds is None else f"{seconds * 1000:.0f}"
+
+
+def bracket_table(runs, reference: StabilityRun | None = None) -> str:
+    """A Markdown table of a bracket's runs; with ``reference`` (and nodes kept), the largest
+    node gap of each run that stayed in one piece to it."""
+    lines = ["| sub-steps per action | sub-step (ms) | outcome | broke after (ms) "
+             "| blew up after (ms) | largest edge stretch | largest node gap to "
+             f"{'the reference' if reference is None else f'{reference.sub_steps} sub-steps'} "
+             "(mm) | wall time (s) |",
+             "|---:|---:|---|---:|---:|---:|---:|---:|"]
+    for run in runs:
+        if run.stable:
+            outcome = f"in one piece over {run.actions} actions"
+        elif run.blew_up_at is None:
+            outcome = f"broke, no node 5 m away in {run.actions} actions"
+        else:
+            outcome = "blew up"
+        gap = (f"{run.gap_to(reference) * 1000:.0f}"
+               if reference is not None and run.stable and run.nodes is not None else "—")
+        stretch = f"{run.stretch.max():.2f}" if run.stretch.size else "—"
+        lines.append(f"| {run.sub_steps} | {run.sub_step * 1000:.3g} | {outcome} "
+                     f"| {_ms(run.physics_time(run.broke_at))} "
+                     f"| {_ms(run.physics_time(run.blew_up_at))} | {stretch} | {gap} "
+                     f"| {run.seconds:.1f} |")
+    return "\n".join(lines)
+
+
+def _bound_line(runs) -> str:
+    held, broke = bracket_bound(runs)
+    parts = []
+    if held is not None:
+        parts.append(f"in one piece up to {held.sub_step * 1000:.3g} ms "
+                     f"({held.sub_steps} sub-steps per action)")
+    if broke is not None:
+        parts.append(f"broke from {broke.sub_step * 1000:.3g} ms ({broke.sub_steps} per action)")
+    return "Bound: " + "; ".join(parts) + "."
+
+
+def substep_bracket_report(actions: int = STABILITY_ACTIONS, repeats: int = 2,
+                           hard_push=(-1.0, 1.0, -1.0), long_actions: int = 1000,
+                           fine_sub_steps: int = 40, command: str = "", report=None) -> str:
+    """The Markdown of ``benchmarks/results/substep_bracket.md``, every run in this process:
+    :data:`BRACKET_SUB_STEPS` on the lesson's push ``repeats`` times (the node gap of each run
+    that held to the authors' 20 sub-steps), on a full-speed push ``hard_push``, the largest
+    sub-step that held over ``long_actions`` actions, and ``fine_sub_steps`` against 20."""
+    import platform
+
+    started = time.perf_counter()
+    first = substep_bracket(actions=actions, keep_nodes=True, report=report)
+    reference = next(r for r in first if r.sub_steps == SimParams().sub_steps)
+    push = ", ".join(f"{x:g}" for x in STABILITY_PUSH)
+    out = [
+        "# Lesson 05's sub-step bound, bracketed",
+        "",
+        f"Made by `{command or 'python -m dlo_course.simulation'}` on "
+        f"{time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, every run in one process "
+        f"(pybullet {getattr(p, '__version__', '3.2.7')}, Python {platform.python_version()}, "
+        f"{os.cpu_count()} cores shared with other work: read the wall times as rough).",
+        "",
+        f"The protocol (`dlo_course.simulation.stability_run`): a fresh `RodScene` of the "
+        f"default `SimParams` ({SimParams().physics_time_per_action * 1000:g} ms of physics per "
+        f"action), the tip pushed with action ({push}) for {STABILITY_PUSH_ACTIONS} actions, "
+        f"then held still (action 0), {actions} actions in all. After each action: the largest "
+        f"edge stretch (an edge's length over its rest length) and the farthest node from the "
+        f"tip. *Broke*: an edge longer than {BROKEN_STRETCH:g} times its rest length. *Blew "
+        f"up*: a node more than {SimParams().max_node_distance:g} m from the tip or below "
+        f"z = -1 m (`RodScene.is_unstable`, the test that ends an environment's episode).",
+        "",
+        "## The lesson's push",
+        "",
+        bracket_table(first, reference),
+        "",
+        _bound_line(first),
+        "",
+    ]
+    for k in range(2, repeats + 1):
+        again = substep_bracket(actions=actions, keep_nodes=True, report=report)
+        same = all(a.nodes.shape == b.nodes.shape and np.array_equal(a.nodes, b.nodes)
+                   for a, b in zip(first, again) if a.stable)
+        out += [f"## The same runs again, in the same process (pass {k})", "",
+                bracket_table(again, reference), "", _bound_line(again), "",
+                f"Runs that held, node positions identical to the first pass: "
+                f"{'yes' if same else 'no'}.", ""]
+    hard = substep_bracket(actions=actions, push=hard_push, report=report)
+    out += [f"## A full-speed push: action ({', '.join(f'{x:g}' for x in hard_push)})", "",
+            bracket_table(hard), "", _bound_line(hard), ""]
+    def one(sub_steps: int, n_actions: int, **kwargs) -> StabilityRun:
+        run = stability_run(sub_steps, n_actions, **kwargs)
+        if report is not None:
+            report(run)
+        return run
+
+    held = bracket_bound(first)[0]
+    if held is not None and long_actions:
+        longer = one(held.sub_steps, long_actions)
+        out += ["## Longer", "",
+                f"The lesson's push at {held.sub_steps} sub-steps ({held.sub_step * 1000:.3g} ms), "
+                f"{long_actions} actions ({long_actions * longer.physics_per_action:g} s of "
+                f"physics): {longer.summary().split(': ', 1)[1]}.", ""]
+    if fine_sub_steps:
+        fine = one(fine_sub_steps, actions, keep_nodes=True)
+        out += ["## Finer than the authors'", "",
+                f"The lesson's push at {fine_sub_steps} sub-steps ({fine.sub_step * 1000:.3g} ms) "
+                f"against {reference.sub_steps} ({reference.sub_step * 1000:.3g} ms): largest "
+                f"node gap {fine.gap_to(reference) * 1000:.1f} mm over {actions} actions.", ""]
+    out += [f"Wall time of the whole measurement: {time.perf_counter() - started:.0f} s.", ""]
+    return "\n".join(out)
+
+
+def main(argv=None) -> None:
+    """``python -m dlo_course.simulation [--out FILE]``: lesson 05's sub-step bracket."""
+    import argparse
+    import shlex
+
+    parser = argparse.ArgumentParser(prog="python -m dlo_course.simulation",
+                                     description="Lesson 05's sub-step bracket, in Markdown.")
+    parser.add_argument("--out", type=Path, default=None, help="write it here (else stdout)")
+    parser.add_argument("--actions", type=int, default=STABILITY_ACTIONS)
+    parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--long-actions", type=int, default=1000)
+    args = parser.parse_args(argv)
+    command = shlex.join(["python", "-m", "dlo_course.simulation",
+                          *(sys.argv[1:] if argv is None else argv)])
+    text = substep_bracket_report(actions=args.actions, repeats=args.repeats,
+                                  long_actions=args.long_actions, command=command,
+                                  report=lambda run: print(run.summary(), flush=True))
+    if args.out is None:
+        print(text)
+    else:
+        args.out.write_text(text, encoding="utf-8")
+        print(f"wrote {args.out}")
+
+
+if __name__ == "__main__":
+    main()

@@ -100,10 +100,7 @@ DERIVED = {
     ("04_ddpg", "three times"),  # 20 000 steps (ddpg_pendulum.txt) / pendulum.TRAIN_STEPS = 3.3;
                                  # test_lesson_04_step_ratio_is_more_than_three checks it
     ("04_ddpg", "≈ 69"),         # Polyak half-life ln 2 / -ln(1 - 0.01) = 69 updates
-    ("05_soft_bodies_in_pybullet", "twenty times"),  # 20 sub-steps against 2 or 1 (ten to twenty)
     ("05_soft_bodies_in_pybullet", "20 times"),      # 0.06 s / 0.003 s of physics per action
-    ("05_soft_bodies_in_pybullet", "~0.15"),         # h/c printed by the section's cell, and the
-                                                     # authors' 0.003 s / 20 sub-steps
     ("07_deformation_databases", "twice"),     # SWEEP_STEPS_PER_MOVE = 2 physics steps per move
     ("07_deformation_databases", "about two"),  # "about two fifths": 0.15 x 0.5 x 0.25 over
                                                 # 0.2 x 0.8 x 0.3, the arithmetic beside it
