@@ -225,8 +225,8 @@ def test_tip_target_stays_in_the_workspace(make_env, far_goals):
 
 @pytest.mark.slow
 def test_a_blown_up_simulation_ends_the_episode_without_nans(make_env, far_goals):
-    # Undamped 3 ms sub-steps, far above the stable 0.3 ms: the rod explodes within a few
-    # actions of shaking.
+    # Undamped 3 ms sub-steps, four times the largest that held in lesson 05's bracket
+    # (benchmarks/results/substep_bracket.md): the rod explodes within a few actions of shaking.
     env = make_env(n_nodes=4, goals=far_goals, params=SimParams(sub_steps=1, damping=0.0))
     env.reset(seed=0)
     for i in range(30):
