@@ -393,8 +393,10 @@ def reproduction_time_markdown(root: Path = REPO_ROOT) -> str:
 
 
 def _graded_items(root: Path) -> list[tuple[str, list[tuple[str, int, str]], list[str]]]:
-    """(notebook stem, [(name, points, "code" or "text")], required data files) per solution
-    notebook, in the course's order, from the cells' ``dlo_course`` metadata."""
+    """(notebook stem, [(name, points, "code", "text" or "choice")], required data files) per
+    solution notebook, in the course's order, from the cells' ``dlo_course`` metadata: a
+    written answer is "text" (prose, for the instructor) or "choice" (among stated options,
+    graded automatically)."""
     lessons = []
     for path in sorted((root / "solutions").glob("[0-9][0-9]_*.ipynb")):
         nb = json.loads(path.read_text(encoding="utf-8"))
@@ -404,7 +406,8 @@ def _graded_items(root: Path) -> list[tuple[str, list[tuple[str, int, str]], lis
             if "exercise" in meta and cell["cell_type"] == "code":
                 items.append((meta["exercise"], int(meta.get("points", 1)), "code"))
             elif "answer" in meta and cell["cell_type"] == "markdown":
-                items.append((meta["answer"], int(meta.get("points", 1)), "text"))
+                items.append((meta["answer"], int(meta.get("points", 1)),
+                              "choice" if "choices" in meta else "text"))
         needs = nb.get("metadata", {}).get("dlo_course", {}).get("requires", [])
         lessons.append((path.stem, items, list(needs)))
     return lessons
@@ -416,7 +419,8 @@ def exercises_markdown(root: Path = REPO_ROOT) -> str:
     lines = ["| notebook | exercises (points) | points | needs (in `data/`) |", "|---|---|---|---|"]
     for stem, items, needs in _graded_items(root):
         code = ", ".join(f"`{n}` ({p})" for n, p, kind in items if kind == "code")
-        text = ", ".join(f"`{n}` ({p})" for n, p, kind in items if kind == "text")
+        text = ", ".join(f"`{n}` ({p}{', a choice' if kind == 'choice' else ''})"
+                         for n, p, kind in items if kind in ("text", "choice"))
         graded = code + (f"; written: {text}" if text else "")
         lines.append(f"| `{stem}` | {graded} | {sum(p for _, p, _ in items)} | "
                      f"{', '.join(f'`{n}`' for n in needs)} |")
@@ -429,9 +433,12 @@ def course_size_markdown(root: Path = REPO_ROOT) -> str:
     items = [item for _, lesson, _ in _graded_items(root) for item in lesson]
     code = [p for _, p, kind in items if kind == "code"]
     text = [p for _, p, kind in items if kind == "text"]
-    return (f"{len(code)} exercises ({sum(code)} points, graded automatically) and "
-            f"{len(text)} written answers ({sum(text)} points, given by the instructor): "
-            f"{sum(code) + sum(text)} points.\n")
+    choice = [p for _, p, kind in items if kind == "choice"]
+    automatic = (f"{len(code)} exercises ({sum(code)} points) and {len(choice)} written "
+                 f"choices ({sum(choice)} points), graded automatically" if choice else
+                 f"{len(code)} exercises ({sum(code)} points, graded automatically)")
+    return (f"{automatic}; {len(text)} written answers ({sum(text)} points), given by the "
+            f"instructor: {sum(code) + sum(choice) + sum(text)} points.\n")
 
 
 BLOCKS: dict[str, Callable[[Path], str]] = {

@@ -83,8 +83,10 @@ def catalog() -> dict[str, int]:
 
 
 def written() -> set[str]:
-    """The course's written answers: no pattern gives their points (issue 51)."""
-    return {e["exercise"] for e in notebooks.exercises(SOLUTIONS) if e["kind"] == "text"}
+    """The course's written answers in prose: no pattern gives their points, they await the
+    instructor's review (issue 51; a choice among stated options is graded automatically)."""
+    return {e["exercise"] for e in notebooks.exercises(SOLUTIONS)
+            if e["kind"] == "text" and not e.get("choices")}
 
 
 # ------------------------------------------------------------------ the course's shape
@@ -304,9 +306,12 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
               if e["notebook"].startswith(SUBMITTED_LESSONS)}
     assert list(rows) == ["alice", "bob"]
     alice = rows["alice"]
-    for name, value in points.items():  # a written answer handed in awaits review
-        expected = (PENDING if name in written() else str(value)) if name in handed else "0"
-        assert alice[name] == expected, f"alice's {name}"
+    def got(row, name):  # a written answer handed in awaits review
+        return row[name] if row[name] == PENDING else float(row[name])
+
+    for name, value in points.items():
+        expected = (PENDING if name in written() else value) if name in handed else 0
+        assert got(alice, name) == expected, f"alice's {name}"
     assert float(alice["max_total"]) == sum(points.values())
     assert float(alice["total"]) == sum(points[n] for n in handed - written())
     assert float(alice["pending"]) == sum(points[n] for n in handed & written())
@@ -315,8 +320,8 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
     lost = {"bellman_target", "discounted_return", "critic_loss", "RingBuffer", "prediction_ring",
             "own_agent_report", "pendulum_agent"} | (set(points) - handed)
     for name, value in points.items():
-        expected = "0" if name in lost else PENDING if name in written() else str(value)
-        assert bob[name] == expected, f"bob's {name}: {bob[name]}, expected {expected}"
+        expected = 0 if name in lost else PENDING if name in written() else value
+        assert got(bob, name) == expected, f"bob's {name}: {bob[name]}, expected {expected}"
     assert float(bob["total"]) == sum(points.values()) - sum(points[n] for n in lost | written())
 
 

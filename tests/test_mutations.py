@@ -337,18 +337,20 @@ MUTANTS: dict[str, list[tuple]] = {
          "float(rng.uniform(checked[name][1], checked[name][0]))"),
         ("zero and negative bounds accepted", "if not (math.isfinite(bound) and bound > 0):",
          "if not math.isfinite(bound):")],
-    "prediction_controller_vs_agent": [
+    "prediction_controller_vs_agent": [  # a choice among stated options: graded automatically
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
-        ("too short", WHOLE_ANSWER, "The agent wins."),
-        ("neither an outcome nor a reason", WHOLE_ANSWER,
-         "I will run the cell first and then read what the table says about both methods.",
-         AWAITS)],
-    "prediction_robustness": [
+        ("an outcome in words, no option's letter", WHOLE_ANSWER, "The agent wins."),
+        ("no option chosen", WHOLE_ANSWER,
+         "I will run the cell first and then read what the table says about both methods."),
+        ("two options", WHOLE_ANSWER, "(a) or (b): one of the two will win, I cannot say which."),
+        ("issue 51's vacuous sentence", WHOLE_ANSWER, VACUOUS)],
+    "prediction_robustness": [  # a choice among stated options: graded automatically
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
-        ("too short", WHOLE_ANSWER, "The noise."),
-        ("neither an outcome nor a reason", WHOLE_ANSWER,
-         "I would rather wait for the benchmark to tell me what happens in each of the worlds.",
-         AWAITS)],
+        ("a change in words, no option's letter", WHOLE_ANSWER, "The noise."),
+        ("no option chosen", WHOLE_ANSWER,
+         "I would rather wait for the benchmark to tell me what happens in each of the worlds."),
+        ("every option", WHOLE_ANSWER, "(a), (b), (c), (d) or (e): any of them could happen."),
+        ("a letter beyond the options", WHOLE_ANSWER, "(f) because the rod is long.")],
     "prediction_cells": [
         ("placeholder left", WHOLE_ANSWER, "YOUR ANSWER HERE"),
         ("too short", WHOLE_ANSWER, "About six cells."),

@@ -170,6 +170,104 @@ def test_the_grader_reports_a_malformed_rubric(tmp_path):
     assert "not a valid regular expression" in entry["message"]
 
 
+# ------------------------------------------------------------------ choices (issue 51)
+# Where a prediction is a choice among stated options, the answer is structured and its grade
+# automatic: the point for naming exactly one option's letter.
+
+CHOICE_STEM = "96_choice_demo"
+OPTIONS = ["the controller wins", "the agent wins", "the intervals cannot tell"]
+CHOICE_TEST = f'''
+import pytest
+
+pytestmark = pytest.mark.notebook("{CHOICE_STEM}")
+
+
+@pytest.mark.exercise("prediction_pick", points=1)
+def test_prediction_pick(written_answer):
+    written_answer.check()
+'''
+
+
+def choice_notebook(text: str) -> dict:
+    cell = answer_cell("prediction_pick", 1, 1, text)
+    cell["metadata"]["dlo_course"]["choices"] = OPTIONS
+    cell["source"] = cell["source"].replace("at least 1 words", "at least 1 word")
+    return {"cells": [cell], "metadata": {}, "nbformat": 4, "nbformat_minor": 5}
+
+
+def grade_choice(tmp_path, text: str) -> dict:
+    folder = tmp_path / "grading_choice"
+    folder.mkdir()
+    shutil.copy(notebooks.GRADING_TESTS_DIR / "conftest.py", folder / "conftest.py")
+    (folder / f"test_{CHOICE_STEM}.py").write_text(CHOICE_TEST)
+    student = tmp_path / "student"
+    notebooks.write_notebook(choice_notebook(text), student / f"{CHOICE_STEM}.ipynb")
+    out = tmp_path / "grades.json"
+    proc = subprocess.run(grading_command(student, folder, out), cwd=REPO_ROOT,
+                          capture_output=True, text=True, timeout=300)
+    assert out.is_file(), proc.stdout[-3000:] + proc.stderr[-3000:]
+    return json.loads(out.read_text())["exercises"][0]
+
+
+def test_chosen_options_are_the_letters_in_brackets():
+    assert notebooks.chosen_options("(b), because the probes are early.", OPTIONS) == ["b"]
+    assert notebooks.chosen_options("(B) is my bet", OPTIONS) == ["b"]
+    assert notebooks.chosen_options("(a) or (c)", OPTIONS) == ["a", "c"]
+    assert notebooks.chosen_options("(d), since none fits", OPTIONS) == []  # not an option
+    assert notebooks.chosen_options(VACUOUS, OPTIONS) == []
+    assert notebooks.chosen_options("b: the agent", OPTIONS) == []
+    for bad in (["only one"], ["same", "same"], ["a", ""], "ab", ["two\nlines", "b"]):
+        with pytest.raises(ValueError, match="'pick': choices must be a list of 2 to 26"):
+            notebooks.check_choices(bad, "pick")
+
+
+def test_release_lists_the_options_and_the_grader_reads_them_from_the_solution(tmp_path):
+    notebooks.write_notebook(choice_notebook("(b) because."),
+                             tmp_path / "solutions" / f"{CHOICE_STEM}.ipynb")
+    notebooks.release(tmp_path / "solutions", tmp_path / "lessons")
+    cell = notebooks.read_notebook(tmp_path / "lessons" / f"{CHOICE_STEM}.ipynb")["cells"][0]
+    assert notebooks.cell_source(cell).split("\n") == [
+        "<!-- answer: prediction_pick (1 point, at least 1 word) -->",
+        notebooks.ANSWER_PLACEHOLDER, "",
+        "*Choose one, by its letter:* (a) the controller wins; (b) the agent wins; "
+        "(c) the intervals cannot tell"]
+    assert notebooks.answer_text(cell) == ""  # the listed options are not a choice
+    assert notebooks.answer_info(cell)["choices"] == OPTIONS
+
+
+@pytest.mark.parametrize("answer, earned, found", [
+    ("(b), because the probed Jacobian is measured before the rod follows its tip.", 1, None),
+    ("(c)", 1, None),
+    ("The agent wins, because the probes come too early.", 0, "found: none"),
+    ("(a) or (b), I cannot decide.", 0, "found: (a), (b)"),
+    (VACUOUS, 0, "found: none"),
+    ("", 0, None),
+])
+def test_a_choice_is_graded_automatically(tmp_path, answer, earned, found):
+    entry = grade_choice(tmp_path, answer)
+    assert entry["earned"] == earned and "pending" not in entry
+    assert entry["outcome"] == ("passed" if earned else "failed")
+    if found:
+        assert found in entry["message"] and "(c) the intervals cannot tell" in entry["message"]
+
+
+def test_the_course_choices_are_met_by_their_solution_and_not_reviewed(tmp_path):
+    choices = {name: info for path in notebooks.notebooks_in(notebooks.SOLUTIONS_DIR)
+               for name, info in notebooks.written_answers(path).items() if info["choices"]}
+    assert set(choices) == {"prediction_controller_vs_agent", "prediction_robustness"}
+    for name, info in choices.items():
+        assert len(notebooks.chosen_options(info["text"], info["choices"])) == 1, name
+        assert not info["rubric"], name  # a choice's grade is its letter, not a checklist
+    # a reviews file cannot give a choice points: refused before grading, as no prose answer
+    path = tmp_path / "reviews.csv"
+    path.write_text("student,exercise,points\nalice,prediction_robustness,1\n")
+    (tmp_path / "class" / "alice").mkdir(parents=True)
+    result = CliRunner().invoke(main, ["course", "grade", str(tmp_path / "class"), "--out",
+                                       str(tmp_path / "g.csv"), "--reviews", str(path)])
+    assert result.exit_code != 0
+    assert "'prediction_robustness' is not a written answer" in result.output
+
+
 # ------------------------------------------------------------------ release
 
 

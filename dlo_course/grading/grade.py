@@ -123,7 +123,8 @@ def grade(submissions: str | Path, out: str | Path, tests: str | Path = GRADING_
     if not students:
         raise FileNotFoundError(f"no student folders in {submissions}")
     known = exercises(catalog) if Path(catalog).is_dir() else []
-    written = {e["exercise"]: e["points"] for e in known if e.get("kind") == "text"}
+    written = {e["exercise"]: e["points"] for e in known  # prose: a choice is automatic
+               if e.get("kind") == "text" and not e.get("choices")}
     reviewed = read_reviews(reviews, [p.name for p in students], written or None) \
         if reviews is not None else {}
     columns = [e["exercise"] for e in known]

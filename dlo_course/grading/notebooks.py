@@ -23,6 +23,13 @@ Conventions (nbgrader's, kept deliberately small):
   verbatim in the class CSV, where the instructor's points enter through a reviews file
   (:mod:`dlo_course.grading.reviews`). A keyword cannot tell "As I have not run the cell
   yet, I cannot say 1 thing about it here." from a prediction; a reader can.
+* A written answer may instead be a **choice** among stated options: ``"choices": ["<one
+  line>", ...]`` in the same metadata (2 to 26 options, labelled (a), (b), ... in that order).
+  Its grade is automatic, being structured: its points for naming exactly one option's label
+  in brackets, e.g. ``(b)`` (:func:`chosen_options`), none for no option or several.
+  Releasing lists the options under the placeholder (:data:`CHOICES_PREFIX`); the student's
+  reason, after the label, is for the discussion with the instructor. Use it where the
+  lesson's question is a choice ("which of these will happen"), not to turn prose into one.
 * A written answer may carry a **rubric**: ``"rubric": [{"criterion": "<one line the
   instructor and the student read>", "patterns": ["<case-insensitive Python regex>", ...]},
   ...]`` in the same metadata: the checklist the instructor reviews the answer against.
@@ -69,6 +76,8 @@ _EXERCISE_COMMENT = re.compile(r"^\s*#\s*exercise:\s*([A-Za-z_]\w*)\s*\((\d+)\s*
                                re.IGNORECASE)
 ANSWER_PLACEHOLDER = "YOUR ANSWER HERE"
 RUBRIC_PREFIX = "*Checked for:*"  # the line of a lesson's written answer that lists its criteria
+CHOICES_PREFIX = "*Choose one, by its letter:*"  # the line that lists a choice's options
+CHOICE_LABELS = "abcdefghijklmnopqrstuvwxyz"
 _ANSWER_COMMENT = re.compile(r"^\s*<!--\s*answer:\s*([A-Za-z_]\w*)\s*\((\d+)\s*points?"
                              r"(?:\s*,\s*at least\s*(\d+)\s*words?)?\s*\)\s*-->", re.IGNORECASE)
 
@@ -156,10 +165,37 @@ def check_rubric(rubric: Any, answer: str) -> list[dict[str, Any]]:
     return checked
 
 
+def check_choices(choices: Any, answer: str) -> list[str]:
+    """A choice answer's options, checked: 2 to 26 distinct lines of text. Raises ValueError
+    naming ``answer`` otherwise."""
+    if not isinstance(choices, list) or not 2 <= len(choices) <= len(CHOICE_LABELS) \
+            or not all(isinstance(c, str) and c.strip() and "\n" not in c.strip()
+                       for c in choices) \
+            or len({c.strip() for c in choices}) != len(choices):
+        raise ValueError(f"written answer {answer!r}: choices must be a list of 2 to "
+                         f"{len(CHOICE_LABELS)} distinct lines of text (got {choices!r})")
+    return [c.strip() for c in choices]
+
+
+def chosen_options(text: str, choices: list[str]) -> list[str]:
+    """The labels of ``choices`` that ``text`` names in brackets (``(b)``, any case), sorted:
+    a choice answer is made when there is exactly one."""
+    labels = set(CHOICE_LABELS[:len(choices)])
+    return sorted({m.group(1).lower() for m in re.finditer(r"\(([a-z])\)", text, re.IGNORECASE)}
+                  & labels)
+
+
+def choices_line(choices: list[str]) -> str:
+    """The options as a lesson shows them under the placeholder:
+    ``*Choose one, by its letter:* (a) ...; (b) ...``."""
+    return f"{CHOICES_PREFIX} " + "; ".join(f"({label}) {choice}"
+                                            for label, choice in zip(CHOICE_LABELS, choices))
+
+
 def answer_info(cell: dict[str, Any]) -> dict[str, Any] | None:
     """``{"exercise": name, "points": n, "min_words": w, "kind": "text"}`` if ``cell`` is a
-    written-answer cell (Markdown), else None; plus ``"rubric"`` (:func:`check_rubric`) if the
-    metadata has one. The metadata wins; the first-line comment
+    written-answer cell (Markdown), else None; plus ``"rubric"`` (:func:`check_rubric`) and
+    ``"choices"`` (:func:`check_choices`) if the metadata has them. The metadata wins; the first-line comment
     ``<!-- answer: NAME (N points, at least W words) -->`` is the fallback."""
     if cell.get("cell_type") != "markdown":
         return None
@@ -169,6 +205,8 @@ def answer_info(cell: dict[str, Any]) -> dict[str, Any] | None:
                 "min_words": int(meta.get("min_words", 1)), "kind": "text"}
         if "rubric" in meta:
             info["rubric"] = check_rubric(meta["rubric"], info["exercise"])
+        if "choices" in meta:
+            info["choices"] = check_choices(meta["choices"], info["exercise"])
         return info
     first = cell_source(cell).lstrip("\n").split("\n", 1)[0]
     match = _ANSWER_COMMENT.match(first)
@@ -189,12 +227,13 @@ def graded_info(cell: dict[str, Any]) -> dict[str, Any] | None:
 
 def answer_text(cell: dict[str, Any]) -> str:
     """What the student wrote in a written-answer cell: the cell without its first-line
-    comment, the placeholder and the released list of criteria (:data:`RUBRIC_PREFIX`),
-    stripped."""
+    comment, the placeholder and the released lists of criteria (:data:`RUBRIC_PREFIX`) and
+    options (:data:`CHOICES_PREFIX`), stripped."""
     lines = cell_source(cell).strip("\n").split("\n")
     if lines and _ANSWER_COMMENT.match(lines[0]):
         lines = lines[1:]
-    lines = [line for line in lines if not line.strip().startswith(RUBRIC_PREFIX)]
+    lines = [line for line in lines
+             if not line.strip().startswith((RUBRIC_PREFIX, CHOICES_PREFIX))]
     return "\n".join(lines).replace(ANSWER_PLACEHOLDER, "").strip()
 
 
@@ -207,13 +246,14 @@ def _answer_info_in(cell: dict[str, Any], where: str) -> dict[str, Any] | None:
 
 def written_answers(path: str | Path) -> dict[str, dict[str, Any]]:
     """The written answers of a notebook: name -> :func:`answer_info` plus ``"text"``
-    (:func:`answer_text`) and ``"rubric"`` (``[]`` if it has none). The last cell of a name
+    (:func:`answer_text`), ``"rubric"`` and ``"choices"`` (``[]`` if it has none). The last cell of a name
     wins, as for exercises. A malformed rubric raises ValueError naming the notebook."""
     found: dict[str, dict[str, Any]] = {}
     for cell in read_notebook(path)["cells"]:
         info = _answer_info_in(cell, Path(path).name)
         if info is not None:
-            found[info["exercise"]] = {"rubric": [], **info, "text": answer_text(cell)}
+            found[info["exercise"]] = {"rubric": [], "choices": [], **info,
+                                       "text": answer_text(cell)}
     return found
 
 
@@ -261,6 +301,10 @@ def rubrics_markdown(folder: str | Path = SOLUTIONS_DIR) -> str:
         lines += [f"## {path.stem}", ""]
         for name, info in answers.items():
             points = f"{info['points']} point{'s' if info['points'] != 1 else ''}"
+            if info["choices"]:
+                lines.append(f"- `{name}`: {points}, a choice, graded automatically: "
+                             + choices_line(info["choices"])[len(CHOICES_PREFIX) + 1:])
+                continue
             lines.append(f"- `{name}`: {points}, at least {info['min_words']} words, "
                          "reviewed by the instructor" + ("" if info["rubric"] else "; no rubric"))
             for number, item in enumerate(info["rubric"], start=1):
@@ -338,10 +382,12 @@ def release_notebook(nb: dict[str, Any], name: str = "notebook") -> dict[str, An
         written = _answer_info_in(cell, where)
         if written is not None:  # the instructor's notes give way to the placeholder
             criteria = f"\n\n{rubric_line(written['rubric'])}" if written.get("rubric") else ""
+            options = f"\n\n{choices_line(written['choices'])}" if written.get("choices") else ""
+            words = written["min_words"]
             _set_source(cell, f"<!-- answer: {written['exercise']} ({written['points']} "
                               f"point{'s' if written['points'] != 1 else ''}, at least "
-                              f"{written['min_words']} words) -->\n{ANSWER_PLACEHOLDER}"
-                              f"{criteria}")
+                              f"{words} word{'s' if words != 1 else ''}) -->\n"
+                              f"{ANSWER_PLACEHOLDER}{options}{criteria}")
             continue
         if cell.get("cell_type") != "code":
             continue

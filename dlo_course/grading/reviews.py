@@ -54,7 +54,8 @@ def read_reviews(path: str | Path, students: Iterable[str] = (),
                 raise ValueError(f"{where}: no student {student!r} is graded")
             if answers is not None:
                 if name not in answers:
-                    raise ValueError(f"{where}: {name!r} is not a written answer of the course")
+                    raise ValueError(f"{where}: {name!r} is not a written answer to review "
+                                     "(one of the course's answers in prose)")
                 if points > answers[name]:
                     raise ValueError(f"{where}: {name!r} is worth {answers[name]:g} "
                                      f"point{'s' if answers[name] != 1 else ''} (got {points:g})")
@@ -76,7 +77,7 @@ def apply_reviews(report: dict[str, Any], student: str,
     mine = {name: review for (who, name), review in reviews.items() if who == student}
     for entry in report.get("exercises", []):
         review = mine.pop(entry["exercise"], None)
-        if review is None or "text" not in entry:
+        if review is None or "text" not in entry or entry.get("choices"):
             continue
         if review["points"] > entry["points"]:
             raise ValueError(f"{student}'s {entry['exercise']!r} is worth {entry['points']:g} "
@@ -89,14 +90,15 @@ def apply_reviews(report: dict[str, Any], student: str,
 
 
 def review_rows(student: str, report: dict[str, Any]) -> list[dict[str, Any]]:
-    """The rows of the reviews file to fill in for ``student``: every written answer the
-    grader recorded, with the points already reviewed (empty while pending, and for a
-    missing or too-short answer, whose 0 stands unless the instructor writes points)."""
+    """The rows of the reviews file to fill in for ``student``: every written answer in
+    prose the grader recorded (not a choice, whose grade is automatic), with the points
+    already reviewed (empty while pending, and for a missing or too-short answer, whose 0
+    stands unless the instructor writes points)."""
     return [{"student": student, "exercise": e["exercise"],
              "points": f"{e['earned']:g}" if e.get("outcome") == REVIEWED else "",
              "max_points": f"{e['points']:g}", "comment": e.get("review_comment", ""),
              "text": e["text"]}
-            for e in report.get("exercises", []) if "text" in e]
+            for e in report.get("exercises", []) if "text" in e and not e.get("choices")]
 
 
 def write_review_file(path: str | Path, rows: Iterable[dict[str, Any]]) -> Path:

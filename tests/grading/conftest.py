@@ -428,14 +428,21 @@ class WrittenAnswer:
     nothing yet, its points pending (:func:`pytest_runtest_logreport`), until the
     instructor's reviews file gives them (:mod:`dlo_course.grading.reviews`). The text, and
     which criteria of its rubric have patterns in it (a hint for the reader, not points), go
-    into the grades (``--grades-json``, the class CSV)."""
+    into the grades (``--grades-json``, the class CSV).
 
-    def __init__(self, name: str, text: str, min_words: int, rubric=(), record=None):
+    A **choice** answer (``choices``) is structured, so its grade is automatic: it passes,
+    with its points, when it names exactly one option's label, e.g. ``(b)``
+    (:func:`dlo_course.grading.notebooks.chosen_options`), and fails listing the options
+    otherwise."""
+
+    def __init__(self, name: str, text: str, min_words: int, rubric=(), record=None,
+                 choices=()):
         self.name, self.text, self.min_words = name, text, min_words
-        self.rubric, self.record = list(rubric), record
+        self.rubric, self.record, self.choices = list(rubric), record, list(choices)
 
     def check(self) -> None:
-        from dlo_course.grading.notebooks import rubric_met, written_answer_problem
+        from dlo_course.grading.notebooks import (choices_line, chosen_options, rubric_met,
+                                                  written_answer_problem)
 
         if self.record is not None and self.rubric:
             self.record["rubric"] = [{"criterion": item["criterion"], "patterns_found": found}
@@ -444,6 +451,16 @@ class WrittenAnswer:
         problem = written_answer_problem(self.text, self.min_words)
         if problem:
             pytest.fail(f"{self.name}: {problem}", pytrace=False)
+        if self.choices:
+            if self.record is not None:
+                self.record["choices"] = self.choices
+            chosen = chosen_options(self.text, self.choices)
+            if len(chosen) != 1:
+                found = ", ".join(f"({label})" for label in chosen) or "none"
+                pytest.fail(f"{self.name}: name exactly one of the options by its letter in "
+                            f"brackets, e.g. (b), then say why (found: {found}). "
+                            f"{choices_line(self.choices)}", pytrace=False)
+            return  # a choice among stated options: its points are automatic
         if self.record is not None:
             self.record["review"] = True
 
@@ -452,8 +469,9 @@ class WrittenAnswer:
 def written_answer(request):
     """The graded written answer (the test's ``exercise`` marker) as a :class:`WrittenAnswer`;
     its text is recorded with the grades, even when it is too short. Its rubric and least
-    number of words are the course's solution's when ``solutions/`` has the notebook (a
-    student who edits or drops the cell's metadata cannot change them), else the cell's own."""
+    number of words (and a choice's options) are the course's solution's when ``solutions/``
+    has the notebook (a student who edits or drops the cell's metadata cannot change them),
+    else the cell's own."""
     from dlo_course.grading.notebooks import SOLUTIONS_DIR, written_answers
     from dlo_course.grading.runner import ExerciseError, find_notebook
 
@@ -467,6 +485,7 @@ def written_answer(request):
         pytest.fail(f"{notebook}.ipynb: no written-answer cell for {name!r} (keep the cell "
                     f"and its first line <!-- answer: {name} ... -->)", pytrace=False)
     rubric, min_words = answers[name]["rubric"], answers[name]["min_words"]
+    choices = answers[name]["choices"]
     solution = SOLUTIONS_DIR / f"{notebook}.ipynb"
     if solution.is_file():
         try:
@@ -474,7 +493,8 @@ def written_answer(request):
         except ValueError as err:
             pytest.fail(str(err), pytrace=False)
         rubric, min_words = course.get("rubric", rubric), course.get("min_words", min_words)
+        choices = course.get("choices", choices)
     record = _GRADES.get(request.node.nodeid)
     if record is not None:
         record["text"] = answers[name]["text"]
-    return WrittenAnswer(name, answers[name]["text"], min_words, rubric, record)
+    return WrittenAnswer(name, answers[name]["text"], min_words, rubric, record, choices)
