@@ -281,11 +281,15 @@ def test_every_attack_scores_zero_and_changes_no_other_verdict(attacked):
     assert set(earned) == set(catalog)
     wrong = {name: earned[name] for name in ATTACKS if earned[name] != 0}
     assert not wrong, f"attacks that scored: {wrong}\n{attacked['output'][-6000:]}"
-    others = {name: (earned[name], points) for name, points in catalog.items()
-              if name not in ATTACKS and earned[name] != points}
+    # An untouched exercise keeps its points; an untouched prose answer keeps them pending,
+    # for the instructor's review (issue 51), earning none automatically.
+    got = {e["exercise"]: e["earned"] + e.get("pending", 0) for e in attacked["exercises"]}
+    others = {name: (got[name], points) for name, points in catalog.items()
+              if name not in ATTACKS and got[name] != points}
     assert not others, f"exercises hurt by another's attack: {others}\n" \
                        f"{attacked['output'][-6000:]}"
-    assert attacked["total"] == sum(p for n, p in catalog.items() if n not in ATTACKS)
+    assert attacked["total"] + attacked.get("pending", 0) == \
+        sum(p for n, p in catalog.items() if n not in ATTACKS)
 
 
 def test_attacks_leave_nothing_outside_the_scratch_folder(attacked):
