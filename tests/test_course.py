@@ -118,9 +118,11 @@ def test_each_lesson_has_goals_exercises_summary_and_reading(path):
     for cell in nb["cells"]:  # a written answer's metadata and its first-line comment agree
         info = notebooks.answer_info(cell)
         if info is not None:
-            without_metadata = {**cell, "metadata": {}}  # the rubric lives in the metadata only
+            # the rubric and a choice's options live in the metadata only
+            without_metadata = {**cell, "metadata": {}}
             assert notebooks.answer_info(without_metadata) == \
-                {k: v for k, v in info.items() if k != "rubric"}, notebooks.cell_source(cell)
+                {k: v for k, v in info.items() if k not in ("rubric", "choices")}, \
+                notebooks.cell_source(cell)
 
 
 # ------------------------------------------------------------------------ release

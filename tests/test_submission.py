@@ -357,9 +357,10 @@ def test_the_grader_measures_the_agent_and_fills_the_class_csv(
     assert list(rows) == list(names)
     assert {name: float(row["own_agent_report"]) for name, row in rows.items()} == {
         "deep": 0, "edited": 0, "honest": 2, "linked": 0, "swapped": 0}
-    others = {name: float(row["total"]) - float(row["own_agent_report"])
+    # the rest, unchanged: the written answers' points pending the instructor's review
+    others = {name: float(row["total"]) + float(row["pending"]) - float(row["own_agent_report"])
               for name, row in rows.items()}
-    assert len(set(others.values())) == 1 and others["honest"] > 0  # the rest: unchanged
+    assert len(set(others.values())) == 1 and others["honest"] > 0
     assert {name: row["report_verified"] for name, row in rows.items()} == {
         "deep": "", "edited": "0", "honest": "1", "linked": "", "swapped": ""}
     honest = rows["honest"]
