@@ -83,8 +83,10 @@ NUMBERS = [
     ("15_why_ddpg_stalls", "83%", "benchmarks/results/sb3_vs_recipe.md",
      "| 83 [74, 89] | 26 [18, 35] |"),
     ("15_why_ddpg_stalls", "26%", "benchmarks/results/sb3_vs_recipe.md", "| 26 [18, 35] |"),
-    ("15_why_ddpg_stalls", "22%", "benchmarks/results/sb3_vs_recipe.md", "| 65 [55, 74] | 22 [15, 31] |"),
-    ("15_why_ddpg_stalls", "17%", "benchmarks/results/sb3_vs_recipe.md", "| 26 [18, 35] | 17 [11, 26] |"),
+    ("15_why_ddpg_stalls", "22%", "benchmarks/results/sb3_vs_recipe.md",
+     "| 65 [55, 74] | 22 [15, 31] |"),
+    ("15_why_ddpg_stalls", "17%", "benchmarks/results/sb3_vs_recipe.md",
+     "| 26 [18, 35] | 17 [11, 26] |"),
 ]
 
 # Numbers of the lessons that are not measurements: derived in the text or by a cell of the
