@@ -14,8 +14,9 @@ unperturbed setting (every factor 1, no noise) is run once and joins every curve
 
 Writes one JSON per setting into --out (``CONTROLLER_PARAMETER_VALUE.json``), skipping the
 settings whose JSON is already there with the same episodes (a stopped run resumes), then
-``results.md`` (the table) and ``robustness.png`` (done % at 0.05 m against each change, with
-Wilson 95% intervals).
+``results.md`` (the table, and each change's paired difference from the training world,
+:func:`dlo_course.robustness.changes_table`) and ``robustness.png`` (done % at 0.05 m against
+each change, with Wilson 95% intervals).
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import argparse
 import time
 from pathlib import Path
 
-from dlo_course import robustness
+from dlo_course import mpi, robustness
 from dlo_course.paths import DATA_DIR
 
 
@@ -71,13 +72,21 @@ def main() -> None:
                                             episodes=args.episodes, seed=args.seed,
                                             show_progress=False)
             took = time.perf_counter() - start
+            if mpi.rank() != 0:
+                continue  # it played its share of the episodes; rank 0 reports
             s = record["summaries"]["0.05"]
             print(f"{path.name}: done {s['done_percent']:.0f}% at 0.05 m "
                   f"({s['done_ci_low']:.0f}-{s['done_ci_high']:.0f}), "
                   f"{record['wall_seconds']} s when run, {took:.0f} s now", flush=True)
 
+    if mpi.rank() != 0:
+        return
     results = robustness.load_results(args.out)
-    (args.out / "results.md").write_text(robustness.results_table(results) + "\n")
+    text = robustness.results_table(results) + "\n"
+    if all(r.get("records") for r in results):  # files written before 2026-12-07 kept none
+        text += ("\nEach change against the training world on the same episodes (the same "
+                 "goals), at 0.05 m:\n\n" + robustness.changes_table(results) + "\n")
+    (args.out / "results.md").write_text(text)
     robustness.plot_results(results, args.out / "robustness.png")
     print(f"wrote {args.out / 'results.md'} and {args.out / 'robustness.png'}")
 

@@ -164,6 +164,11 @@ def train_sb3(algorithm: str, out: str | Path, total_steps: int, env_kwargs: dic
                     **{"buffer_size": total_steps, **sb3_settings(algorithm),
                        **(overrides or {})})
         wall = 0.0
+    from stable_baselines3.common.logger import Logger
+
+    # SB3's default logger makes an empty folder in /tmp at every learn() call, even with
+    # verbose=0; the course records the run in sb3_state.json instead.
+    model.set_logger(Logger(folder=None, output_formats=[]))
     done = int(model.num_timesteps)
     started = time.monotonic()
 

@@ -272,6 +272,94 @@ def curves(results: Sequence[dict], threshold: float = TRAIN_THRESHOLD) -> dict:
     return {k: sorted(set(rows)) for k, rows in sorted(points.items())}
 
 
+def paired_difference(setting: dict, nominal: dict, threshold: float = TRAIN_THRESHOLD
+                      ) -> tuple[float, float, float, int]:
+    """How much one setting changes done % at ``threshold``, against the training world, on the
+    same episodes: ``(difference, low, high, discordant)`` in percentage points, with a 95%
+    interval for paired proportions, and the number of episodes whose outcome differs between
+    the two worlds.
+
+    Both records come from :func:`run_setting` with the same goal draw, so episode i plays the
+    same goal in both: comparing episode by episode removes the goals' own spread (an easy goal
+    is easy in both worlds), and the interval is much narrower than two Wilson intervals side
+    by side. The interval is Newcombe's for paired data (his method 10, Statistics in Medicine
+    17, 1998): each setting's Wilson interval, combined with the correlation of the two
+    worlds' outcomes. Unlike a bootstrap it stays a few points wide when no episode changed
+    (100 episodes cannot show that nothing changes), and it needs no random draw.
+
+    Raises:
+        ValueError: if either record has no episodes at ``threshold`` (records written before
+            they were kept) or the two did not play the same goals.
+    """
+    from dlo_course.evaluation import wilson_interval
+
+    key = f"{threshold:g}"
+    outcomes = []
+    for record in (setting, nominal):
+        episodes = record.get("records", {}).get(key)
+        if not episodes:
+            raise ValueError(f"{record.get('controller')}, {record.get('parameter')}: no "
+                             f"episodes kept at {key} m (rerun it with benchmarks/robustness.py)")
+        outcomes.append({e["episode"]: (e["goal_index"], bool(e["done"])) for e in episodes})
+    changed, base = outcomes
+    if {i: g for i, (g, _) in changed.items()} != {i: g for i, (g, _) in base.items()}:
+        raise ValueError("the two settings did not play the same goals: pair only settings of "
+                         "one goal draw")
+    pairs = [(changed[i][1], base[i][1]) for i in base]
+    n = len(pairs)
+    both = sum(x and y for x, y in pairs)
+    gained = sum(x and not y for x, y in pairs)   # reached only in the changed world
+    lost = sum(y and not x for x, y in pairs)     # reached only in the training world
+    neither = n - both - gained - lost
+    p1, p2 = (both + gained) / n, (both + lost) / n
+    (l1, u1), (l2, u2) = wilson_interval(both + gained, n), wilson_interval(both + lost, n)
+    margins = (both + gained) * (lost + neither) * (both + lost) * (gained + neither)
+    phi = (both * neither - gained * lost) / math.sqrt(margins) if margins else 0.0
+    below = math.sqrt(max(0.0, (p1 - l1) ** 2 - 2 * phi * (p1 - l1) * (u2 - p2) + (u2 - p2) ** 2))
+    above = math.sqrt(max(0.0, (u1 - p1) ** 2 - 2 * phi * (u1 - p1) * (p2 - l2) + (p2 - l2) ** 2))
+    diff = p1 - p2
+    return 100.0 * diff, 100.0 * (diff - below), 100.0 * (diff + above), gained + lost
+
+
+def paired_changes(results: Sequence[dict], threshold: float = TRAIN_THRESHOLD) -> list[dict]:
+    """Every perturbed setting of ``results`` against its controller's training world
+    (:func:`paired_difference`): dicts with ``controller``, ``parameter``, ``value``,
+    ``difference``, ``low``, ``high``, ``discordant`` and ``told_apart`` (the interval
+    excludes 0). Settings without a training world of their controller are left out."""
+    nominal = {r["controller"]: r for r in results if r["parameter"] == NOMINAL}
+    rows = []
+    for r in results:
+        if r["parameter"] == NOMINAL or r["controller"] not in nominal:
+            continue
+        diff, low, high, discordant = paired_difference(r, nominal[r["controller"]], threshold)
+        rows.append({"controller": r["controller"], "parameter": r["parameter"],
+                     "value": r["value"], "difference": diff, "low": low, "high": high,
+                     "discordant": discordant, "told_apart": high < 0 or low > 0})
+    return rows
+
+
+def change_label(parameter: str, value: float) -> str:
+    """How a setting reads in a table: ``"mass x 1.3"``, ``"noise on P_c, std 5 mm"``."""
+    if parameter == NOMINAL:
+        return "none (training world)"
+    if parameter == NOISE:
+        return f"noise on P_c, std {1000 * value:g} mm"
+    return f"{parameter} x {value:g}"
+
+
+def changes_table(results: Sequence[dict], threshold: float = TRAIN_THRESHOLD) -> str:
+    """A Markdown table of :func:`paired_changes`: each setting's change of done % at
+    ``threshold`` from the training world, with its paired 95% interval."""
+    lines = [f"| controller | change | done % at {threshold:g} m minus the training world's "
+             "(paired 95% CI) | episodes that changed outcome | told apart from the "
+             "training world |", "|---|---|---|---|---|"]
+    for row in paired_changes(results, threshold):
+        lines.append(f"| {row['controller']} | {change_label(row['parameter'], row['value'])} | "
+                     f"{row['difference']:+.0f} ({row['low']:+.0f} to {row['high']:+.0f}) | "
+                     f"{row['discordant']} | {'yes' if row['told_apart'] else 'no'} |")
+    return "\n".join(lines)
+
+
 def results_table(results: Sequence[dict], thresholds: Sequence[float] = TABLE_THRESHOLDS
                   ) -> str:
     """A Markdown table of ``results``: one row per setting, done % with its Wilson 95%
@@ -280,12 +368,7 @@ def results_table(results: Sequence[dict], thresholds: Sequence[float] = TABLE_T
         f"done % at {t:g} m (95% CI) | mean final distance at {t:g} m" for t in thresholds)
     lines = [head + " |", "|---|---|---|" + "---|---|" * len(thresholds)]
     for r in results:
-        if r["parameter"] == NOMINAL:
-            change = "none (training world)"
-        elif r["parameter"] == NOISE:
-            change = f"noise on P_c, std {1000 * r['value']:g} mm"
-        else:
-            change = f"{r['parameter']} x {r['value']:g}"
+        change = change_label(r["parameter"], r["value"])
         cells = []
         for t in thresholds:
             s = r["summaries"][f"{t:g}"]

@@ -3,6 +3,7 @@ resumes, and the course's evaluation plays it as it plays a trained DDPG agent; 
 async vector environment runs copies of the rod in their own processes."""
 
 import json
+import tempfile
 
 import gymnasium as gym
 import numpy as np
@@ -19,12 +20,17 @@ SMALL = {"batch_size": 8, "learning_starts": 10}  # so that a few steps do updat
 
 
 @pytest.mark.parametrize("algorithm", baselines.ALGORITHMS)
-def test_sb3_trains_resumes_and_is_evaluated_by_the_course(algorithm, tmp_path):
+def test_sb3_trains_resumes_and_is_evaluated_by_the_course(algorithm, tmp_path, monkeypatch):
     out = tmp_path / algorithm
     env_kwargs = {"n_nodes": 2, "threshold": 0.05}
+    # A temporary folder of this test's own, so that only this run's litter could show.
+    temp = tmp_path / "tmp"
+    temp.mkdir()
+    monkeypatch.setattr(tempfile, "tempdir", str(temp))
     baselines.train_sb3(algorithm, out, total_steps=14, env_kwargs=env_kwargs,
                         max_episode_steps=8, checkpoint_every=7, progress=False,
                         overrides=SMALL)
+    assert not list(temp.glob("SB3-*"))  # SB3's default logger leaves one per learn() call
     state = json.loads((out / baselines.SB3_STATE_FILE).read_text())
     assert state["steps"] == 14 and state["algorithm"] == algorithm
     assert not (out / baselines.SB3_BUFFER_FILE).exists()  # kept only while unfinished

@@ -268,3 +268,72 @@ def test_results_files_table_and_plot(tmp_path):
     matplotlib.use("Agg")
     robustness.plot_results(results, tmp_path / "plot.png")
     assert (tmp_path / "plot.png").stat().st_size > 1000
+
+
+def _paired_record(parameter, value, done, goals):
+    episodes = [{"episode": i, "goal_index": g, "done": bool(d), "final_distance": 0.04,
+                 "steps": 5, "start_distance": 0.1} for i, (g, d) in enumerate(zip(goals, done))]
+    return {"controller": "nodes4", "parameter": parameter, "value": value,
+            "episodes": len(done), "seed": 0, "summaries": {}, "records": {"0.05": episodes}}
+
+
+def test_a_paired_difference_sees_what_two_wilson_intervals_cannot():
+    goals = list(range(100))
+    nominal = _paired_record("nominal", 1.0, [1] * 80 + [0] * 20, goals)
+    # The same 80 goals reached, minus 8 of them: 72% against 80%, eight episodes changed.
+    worse = _paired_record("mass", 1.3, [1] * 72 + [0] * 28, goals)
+    diff, low, high, discordant = robustness.paired_difference(worse, nominal)
+    assert diff == pytest.approx(-8.0) and discordant == 8
+    assert low < -8 < high < 0  # told apart: no episode got better
+    from dlo_course.evaluation import wilson_interval
+
+    assert wilson_interval(72, 100)[1] > wilson_interval(80, 100)[0]  # the intervals overlap
+    # The same done % from different episodes: no change told apart.
+    swapped = _paired_record("mass", 0.7, [0] * 8 + [1] * 80 + [0] * 12, goals)
+    diff, low, high, discordant = robustness.paired_difference(swapped, nominal)
+    assert diff == 0 and discordant == 16 and low < 0 < high
+    # No episode changed: 100 episodes still leave a few points either way, not a certainty.
+    diff, low, high, discordant = robustness.paired_difference(nominal, nominal)
+    assert diff == 0 and discordant == 0 and -6 < low < -1 and 1 < high < 6
+    rows = robustness.paired_changes([nominal, worse, swapped])
+    assert [(r["value"], r["told_apart"]) for r in rows] == [(1.3, True), (0.7, False)]
+    table = robustness.changes_table([nominal, worse, swapped])
+    assert "mass x 1.3 | -8 (" in table and "| yes |" in table and "| no |" in table
+
+
+def test_a_paired_difference_refuses_records_it_cannot_pair():
+    nominal = _paired_record("nominal", 1.0, [1, 0, 1], [0, 1, 2])
+    with pytest.raises(ValueError, match="same goals"):
+        robustness.paired_difference(_paired_record("mass", 1.3, [1, 1, 1], [0, 1, 3]), nominal)
+    old = dict(_paired_record("mass", 1.3, [1, 1, 1], [0, 1, 2]), records={})
+    with pytest.raises(ValueError, match="no episodes kept"):
+        robustness.paired_difference(old, nominal)
+
+
+@pytest.mark.slow
+@pytest.mark.mpi
+def test_the_benchmark_under_mpiexec_writes_every_file_and_resumes(tmp_path):
+    """The command of benchmarks/results/robustness/README.md, at 2 episodes per setting:
+    under two ranks only rank 0 reports (rank 1 once crashed on the record it does not get)."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    mpiexec = Path(sys.executable).parent / "mpiexec"
+    if not mpiexec.exists():
+        pytest.skip(f"no mpiexec next to {sys.executable}")
+    script = Path(__file__).parents[1] / "benchmarks" / "robustness.py"
+    command = [str(mpiexec), "-n", "2", sys.executable, str(script), "--episodes", "2",
+               "--parameters", "mass", "--factors", "1.3", "--noise", "0",
+               "--out", str(tmp_path)]
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PMI", "MPI", "OMPI"))}
+    first = subprocess.run(command, capture_output=True, text=True, timeout=300, env=env)
+    assert first.returncode == 0, first.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == [
+        "nodes4_mass_1.3.json", "nodes4_nominal.json", "results.md", "robustness.png"]
+    table = (tmp_path / "results.md").read_text()
+    assert "mass x 1.3 | 2 |" in table and "paired 95% CI" in table
+    assert first.stdout.count("nodes4_mass_1.3.json: done") == 1  # rank 0 only
+    again = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
+    assert again.returncode == 0 and "0 s now" in again.stdout  # read back, not replayed
