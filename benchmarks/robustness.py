@@ -84,8 +84,10 @@ def main() -> None:
     results = robustness.load_results(args.out)
     text = robustness.results_table(results) + "\n"
     if all(r.get("records") for r in results):  # files written before 2026-12-07 kept none
-        text += ("\nEach change against the training world on the same episodes (the same "
-                 "goals), at 0.05 m:\n\n" + robustness.changes_table(results) + "\n")
+        for threshold in robustness.TABLE_THRESHOLDS:
+            text += (f"\nEach change against the training world on the same episodes (the "
+                     f"same goals), at {threshold:g} m:\n\n"
+                     + robustness.changes_table(results, threshold) + "\n")
     (args.out / "results.md").write_text(text)
     robustness.plot_results(results, args.out / "robustness.png")
     print(f"wrote {args.out / 'results.md'} and {args.out / 'robustness.png'}")

@@ -337,3 +337,36 @@ def test_the_benchmark_under_mpiexec_writes_every_file_and_resumes(tmp_path):
     assert first.stdout.count("nodes4_mass_1.3.json: done") == 1  # rank 0 only
     again = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
     assert again.returncode == 0 and "0 s now" in again.stdout  # read back, not replayed
+
+
+# The options of lesson 16's prediction (its answer cell's "choices"), by perturbed parameter.
+PREDICTION_OPTIONS = {"youngs_modulus": "a", "mass": "b", "damping": "c", robustness.NOISE: "d"}
+
+
+def test_lesson_16s_answer_is_the_committed_benchmarks():
+    """The instructor's note of lesson 16 names the option that the committed results
+    (benchmarks/results/robustness/) give: the change whose paired interval at 0.05 m lies
+    wholly below the training world, by the largest drop, or (e) when none does; and the
+    results are of the agent the lesson evaluates, today's data/checkpoints/nodes4."""
+    import re
+
+    from dlo_course.grading.notebooks import SOLUTIONS_DIR, read_notebook
+    from dlo_course.paths import AGENTS_DIR, REPO_ROOT
+    from dlo_course.reproduce import actor_digest
+
+    results = robustness.load_results(REPO_ROOT / "benchmarks" / "results" / "robustness")
+    assert results and {r["controller"] for r in results} == {"nodes4"}
+    assert {r["episodes"] for r in results} == {100}
+    rows = robustness.paired_changes(results)
+    drops = [r for r in rows if r["told_apart"] and r["difference"] < 0]
+    expected = PREDICTION_OPTIONS[min(drops, key=lambda r: r["difference"])["parameter"]] \
+        if drops else "e"
+    nb = read_notebook(SOLUTIONS_DIR / "16_robustness.ipynb")
+    answer = next(c for c in nb["cells"]
+                  if c["metadata"].get("dlo_course", {}).get("answer") == "prediction_robustness")
+    assert len(answer["metadata"]["dlo_course"]["choices"]) == len(PREDICTION_OPTIONS) + 1
+    note = next(c for c in nb["cells"]
+                if "answer: prediction_robustness" in "".join(c["source"]))
+    assert re.findall(r"option\s+\(([a-e])\)", "".join(note["source"])) == [expected]
+    readme = (REPO_ROOT / "benchmarks" / "results" / "robustness" / "README.md").read_text()
+    assert actor_digest(AGENTS_DIR / "nodes4") in readme  # the agent the results were made of
