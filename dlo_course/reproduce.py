@@ -30,7 +30,7 @@ from dlo_course import mpi
 from dlo_course.config import DDPGConfig, TrainConfig, preset
 from dlo_course.database import BOXES, load_database
 from dlo_course.evaluation import evaluate_thresholds, load_actor, wilson_interval
-from dlo_course.paths import AGENTS_DIR, DATA_DIR
+from dlo_course.paths import AGENTS_DIR, DATA_DIR, REPO_ROOT
 from dlo_course.plots import plot_deformation, plot_learning_curves
 from dlo_course.rundir import agent_dir, training_record, write_json
 from dlo_course.task import NODE_COUNTS, TABLE_THRESHOLDS
@@ -329,6 +329,27 @@ reinitialisation (benchmarks/results/reproduction_time.txt)."""
 WHOLE_DATABASE_CELLS = {"with": "with", "all": None, "none": ()}
 """Which cells the whole-database table covers: those "with" reinitialisation, all, or none."""
 PAPER_CORE_HOURS = 32 * 3.5  # 32 cores for under 3.5 h
+SEEDS_TABLE = REPO_ROOT / "benchmarks" / "results" / "seeds" / "table1_seeds.md"
+"""Table I over three training seeds of each shipped configuration, made by
+``benchmarks/seeds_table1.py table`` (hours of training and evaluation: not re-run here)."""
+
+
+def seeds_section(checkpoints: Path, nodes: tuple[int, ...], table: Path = SEEDS_TABLE
+                  ) -> list[str]:
+    """The report's lines on the seeds table: one shipped agent per node count is one draw of
+    its training, and the seeds say whether its verdicts hold for the configuration. Only for
+    the shipped agents of all three node counts (the seeds are of their configurations), and
+    only if the committed table is there; otherwise no lines."""
+    if Path(checkpoints).resolve() != AGENTS_DIR.resolve() or nodes != NODE_COUNTS \
+            or not table.is_file():
+        return []
+    body = table.read_text().split("\n", 1)[1].strip()  # without its own title
+    return ["", "## The same cells over training seeds (committed, not re-run by this command)",
+            "", f"From `{table.relative_to(REPO_ROOT)}`: three seeds of each shipped agent's "
+            "training configuration, 100 episodes per cell and seed on the same goals. Read the "
+            "shipped agents' verdicts above against these: where they differ, the seeds' say "
+            "what the configuration does, the shipped agent's what one training run did.",
+            "", body]
 PAPER_TRANSITIONS = 32 * 63 * 300
 
 
@@ -456,6 +477,7 @@ def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = DEFAUL
               "other than 0.05 m)."]
     for title, path, note in tables:
         lines += ["", title, "", note, "", path.read_text()]
+    lines += seeds_section(checkpoints, nodes)
     lines += [f"Files: `{csv_path.name}`, `{md_path.name}`"
               + (", `table1_whole_database.csv`, `table1_whole_database.md`" if whole_rows
                  else "")

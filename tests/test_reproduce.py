@@ -207,3 +207,16 @@ def test_cli_reproduce_evaluates_a_controller_beside_the_agents(tmp_path, monkey
     assert len(list((out / "runs").glob("test_with_n2_small_*.json"))) == 1  # the agent's
     wrong = CliRunner().invoke(main, ["reproduce", "--controller", "nope"])
     assert wrong.exit_code != 0 and "nope" in wrong.output
+
+
+def test_the_report_shows_the_seeds_table_beside_the_shipped_agents(tmp_path):
+    """Issue 49: the report carries the committed seeds table for the shipped agents only."""
+    from dlo_course.paths import AGENTS_DIR
+    from dlo_course.reproduce import SEEDS_TABLE, seeds_section
+
+    lines = "\n".join(seeds_section(AGENTS_DIR, (2, 4, 6)))
+    assert "over training seeds" in lines and "| reinit | nodes |" in lines
+    assert SEEDS_TABLE.read_text().splitlines()[0] not in lines  # its title is the report's
+    assert seeds_section(tmp_path, (2, 4, 6)) == []  # other agents: the seeds are not theirs
+    assert seeds_section(AGENTS_DIR, (4,)) == []
+    assert seeds_section(AGENTS_DIR, (2, 4, 6), table=tmp_path / "none.md") == []
