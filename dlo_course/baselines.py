@@ -155,6 +155,15 @@ def train_sb3(algorithm: str, out: str | Path, total_steps: int, env_kwargs: dic
         model = cls.load(out / SB3_MODEL_FILE, env=env, device="cpu")
         if (out / SB3_BUFFER_FILE).is_file():
             model.load_replay_buffer(out / SB3_BUFFER_FILE)
+        elif total_steps > state["steps"]:
+            import warnings
+
+            # A finished run kept no buffer (see the end of this function), and SB3 sized the
+            # buffer for the first run's total: say so rather than continue as if resumed.
+            warnings.warn(f"{out} holds a finished run of {state['steps']} steps whose replay "
+                          f"buffer was not kept: continuing it to {total_steps} starts from an "
+                          f"empty buffer of {model.buffer_size} transitions, not as a resume",
+                          stacklevel=2)
         wall = state["wall_time_s"]
     else:
         # A buffer as long as the run never drops a transition, so it behaves as SB3's

@@ -35,10 +35,12 @@ def test_sb3_trains_resumes_and_is_evaluated_by_the_course(algorithm, tmp_path, 
     assert state["steps"] == 14 and state["algorithm"] == algorithm
     assert not (out / baselines.SB3_BUFFER_FILE).exists()  # kept only while unfinished
     first = (out / baselines.SB3_MODEL_FILE).read_bytes()
-    # A longer run in the same folder continues from step 14 instead of starting over.
-    baselines.train_sb3(algorithm, out, total_steps=20, env_kwargs=env_kwargs,
-                        max_episode_steps=8, checkpoint_every=7, progress=False,
-                        overrides=SMALL)
+    # A longer run in the same folder continues from step 14 instead of starting over, and
+    # says that the finished run's replay buffer is gone.
+    with pytest.warns(UserWarning, match="empty buffer of 14 transitions"):
+        baselines.train_sb3(algorithm, out, total_steps=20, env_kwargs=env_kwargs,
+                            max_episode_steps=8, checkpoint_every=7, progress=False,
+                            overrides=SMALL)
     assert json.loads((out / baselines.SB3_STATE_FILE).read_text())["steps"] == 20
     assert (out / baselines.SB3_MODEL_FILE).read_bytes() != first  # it learned on
     with pytest.raises(ValueError, match="another run"):
