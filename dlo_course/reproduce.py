@@ -329,6 +329,7 @@ reinitialisation (benchmarks/results/reproduction_time.txt)."""
 WHOLE_DATABASE_CELLS = {"with": "with", "all": None, "none": ()}
 """Which cells the whole-database table covers: those "with" reinitialisation, all, or none."""
 PAPER_CORE_HOURS = 32 * 3.5  # 32 cores for under 3.5 h
+PAPER_TRANSITIONS = 32 * 63 * 300
 SEEDS_TABLE = REPO_ROOT / "benchmarks" / "results" / "seeds" / "table1_seeds.md"
 """Table I over three training seeds of each shipped configuration, made by
 ``benchmarks/seeds_table1.py table`` (hours of training and evaluation: not re-run here)."""
@@ -350,7 +351,6 @@ def seeds_section(checkpoints: Path, nodes: tuple[int, ...], table: Path = SEEDS
             "shipped agents' verdicts above against these: where they differ, the seeds' say "
             "what the configuration does, the shipped agent's what one training run did.",
             "", body]
-PAPER_TRANSITIONS = 32 * 63 * 300
 
 
 def reproduce(out: Path, checkpoints: Path | None = None, episodes: int = DEFAULT_EPISODES,

@@ -14,7 +14,9 @@ SCRIPTS = Path(__file__).parent / "mpi_scripts"
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
 
 
-def run_mpi(n: int, *args: str, timeout: float = 120) -> None:
+def run_mpi(n: int, *args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    """``mpiexec -n n args...``, asserted to succeed; returns the finished process (its
+    captured stdout and stderr)."""
     if not MPIEXEC.exists():
         pytest.skip(f"no mpiexec next to {sys.executable}")
     # A clean environment for the launcher: no MPI variables inherited from this process.
@@ -22,6 +24,7 @@ def run_mpi(n: int, *args: str, timeout: float = 120) -> None:
     proc = subprocess.run([str(MPIEXEC), "-n", str(n), *args], capture_output=True, text=True,
                           timeout=timeout, env=env)
     assert proc.returncode == 0, f"stdout:\n{proc.stdout}\nstderr:\n{proc.stderr}"
+    return proc
 
 
 def test_single_process_helpers():

@@ -315,28 +315,22 @@ def test_a_paired_difference_refuses_records_it_cannot_pair():
 def test_the_benchmark_under_mpiexec_writes_every_file_and_resumes(tmp_path):
     """The command of benchmarks/results/robustness/README.md, at 2 episodes per setting:
     under two ranks only rank 0 reports (rank 1 once crashed on the record it does not get)."""
-    import os
-    import subprocess
     import sys
     from pathlib import Path
 
-    mpiexec = Path(sys.executable).parent / "mpiexec"
-    if not mpiexec.exists():
-        pytest.skip(f"no mpiexec next to {sys.executable}")
+    from test_mpi import run_mpi
+
     script = Path(__file__).parents[1] / "benchmarks" / "robustness.py"
-    command = [str(mpiexec), "-n", "2", sys.executable, str(script), "--episodes", "2",
-               "--parameters", "mass", "--factors", "1.3", "--noise", "0",
-               "--out", str(tmp_path)]
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("PMI", "MPI", "OMPI"))}
-    first = subprocess.run(command, capture_output=True, text=True, timeout=300, env=env)
-    assert first.returncode == 0, first.stderr
+    args = [sys.executable, str(script), "--episodes", "2", "--parameters", "mass",
+            "--factors", "1.3", "--noise", "0", "--out", str(tmp_path)]
+    first = run_mpi(2, *args, timeout=300)
     assert sorted(p.name for p in tmp_path.iterdir()) == [
         "nodes4_mass_1.3.json", "nodes4_nominal.json", "results.md", "robustness.png"]
     table = (tmp_path / "results.md").read_text()
     assert "mass x 1.3 | 2 |" in table and "paired 95% CI" in table
     assert first.stdout.count("nodes4_mass_1.3.json: done") == 1  # rank 0 only
-    again = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
-    assert again.returncode == 0 and "0 s now" in again.stdout  # read back, not replayed
+    again = run_mpi(2, *args)
+    assert "0 s now" in again.stdout  # read back, not replayed
 
 
 # The options of lesson 16's prediction (its answer cell's "choices"), by perturbed parameter.
