@@ -18,10 +18,16 @@ from dlo_course.env import DLOShapeEnv
 SLOW_FILES = {
     "test_course.py": "executes the 16 solution notebooks and grades them",
     "test_grading_attacks.py": "grades attacks in the sandbox",
-    "test_mutations.py": "48 mutation rounds, each a grading in a pytest subprocess",
+    "test_mutations.py": "six mutation rounds, each a grading of every lesson in a pytest subprocess",
 }
 """Files whose every test is slow, by name (marked here: they are being moved with the
 grader, so they are not edited for it now)."""
+
+
+def pytest_addoption(parser):
+    parser.addoption("--mutants-of", default="", metavar="LESSON",
+                     help="tests/test_mutations.py grades only the lessons whose notebook "
+                          "name contains LESSON (e.g. 04_ddpg)")
 
 
 def pytest_collection_modifyitems(config, items):
