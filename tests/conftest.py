@@ -30,10 +30,19 @@ def pytest_addoption(parser):
                           "name contains LESSON (e.g. 04_ddpg)")
 
 
+SHARED_ON_ONE_WORKER = ("trained_hand_in",)
+"""Session fixtures that take minutes to build: every test that uses one runs on the same
+xdist worker (an ``xdist_group`` named after the fixture), which builds it once."""
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's loadgroup reads the groups
 def pytest_collection_modifyitems(config, items):
     for item in items:
         if item.path.name in SLOW_FILES or item.get_closest_marker("mpi"):
             item.add_marker(pytest.mark.slow)
+        for name in SHARED_ON_ONE_WORKER:
+            if name in item.fixturenames:
+                item.add_marker(pytest.mark.xdist_group(name))
 
 
 @pytest.fixture

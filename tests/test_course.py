@@ -209,7 +209,6 @@ def test_release_rejects_a_malformed_exercise(tmp_path):
 # ------------------------------------------------------------------------ grading
 
 
-@pytest.mark.xdist_group("trained_hand_in")  # one worker builds the session fixture once
 def test_grader_gives_full_points_to_the_solutions(tmp_path, handed_in):
     graded = tmp_path / "solutions"  # a copy, with lesson 13's hand-in (never committed)
     graded.mkdir()
@@ -281,7 +280,6 @@ def make_submissions(root: Path, handed_in: Path) -> None:
         notebooks.write_notebook(nb, bob / path.name)
 
 
-@pytest.mark.xdist_group("trained_hand_in")  # one worker builds the session fixture once
 def test_grade_command_grades_each_student_and_isolates_failures(tmp_path, monkeypatch,
                                                                  handed_in):
     make_submissions(tmp_path / "submissions", handed_in)
@@ -364,7 +362,6 @@ def test_written_answer_problem_counts_words():
 CAPSTONE = "13_capstone_table_one"
 
 
-@pytest.mark.xdist_group("trained_hand_in")  # one worker builds the session fixture once
 def test_written_answers_go_verbatim_into_the_csv_and_feedback_sheets(tmp_path, handed_in):
     """Grading a class records each written answer verbatim in the CSV (no points of its own:
     awaiting the instructor's review if long enough, 0 if not) and writes one Markdown

@@ -324,7 +324,6 @@ def one_class(students: Path, catalog: Path, names, hand_ins: dict[str, Path]) -
                             symlinks=True)
 
 
-@pytest.mark.xdist_group("trained_hand_in")  # one worker builds the session fixture once
 @pytest.mark.slow
 def test_the_grader_measures_the_agent_and_fills_the_class_csv(
         trained_hand_in, data_without_the_2_node_agent, tmp_path, monkeypatch):
@@ -410,7 +409,6 @@ def test_the_leaderboard_puts_accepted_agents_first_and_says_what_was_measured()
     assert table[3] == "| 4 | cy | no |  |  |  |  |  |  |  |"
 
 
-@pytest.mark.xdist_group("trained_hand_in")  # one worker builds the session fixture once
 @pytest.mark.slow
 def test_the_attempts_of_issue_37_score_zero_through_course_grade(trained_hand_in, tmp_path):
     """As a student who wants the points without training would try, each through the real
