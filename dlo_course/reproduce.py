@@ -167,7 +167,10 @@ def evaluate_cells(agents: Path | None, episodes: int, max_steps: int, seed: int
                 [cell.threshold for cell in group], reinitialize=first.reinit == "with",
                 episodes=episodes, max_steps=max_steps, seed=seed, n_nodes=first.nodes,
                 time_mode=time_mode, show_progress=False)
-            done = {"minutes": (time.perf_counter() - began) / 60, "summaries": {
+            # the rank count travels with the minutes: a report re-rendered from this cache
+            # under another mpiexec must not credit these minutes to its own ranks
+            done = {"minutes": (time.perf_counter() - began) / 60, "ranks": mpi.size(),
+                    "summaries": {
                 f"{t:g}": (s.as_dict() if s is not None else None)
                 for t, (s, _) in by_threshold.items()}}
             if saved is not None and mpi.is_root():
@@ -178,7 +181,7 @@ def evaluate_cells(agents: Path | None, episodes: int, max_steps: int, seed: int
             summary = done["summaries"][f"{cell.threshold:g}"]
             if summary is not None and mpi.is_root():
                 results[cell] = {"cell": cell, **summary, "minutes": done["minutes"],
-                                 "run_cells": len(group)}
+                                 "ranks": done.get("ranks"), "run_cells": len(group)}
     return [results[cell] for cell in cells if cell in results]
 
 
@@ -204,9 +207,20 @@ def evaluation_minutes(rows: list[dict], reinit: str | None = None) -> float:
                if reinit is None or r["cell"].reinit == reinit)
 
 
+def _ranks_phrase(rows: list[dict]) -> str:
+    """The rank counts the runs behind ``rows`` were made on, from their records (runs cached
+    before the count was recorded say so instead of borrowing this invocation's)."""
+    counts = sorted({r.get("ranks") for r in rows}, key=lambda c: (c is None, c or 0))
+    known = [str(c) for c in counts if c is not None]
+    phrase = " or ".join(known) + " rank(s)" if known else ""
+    if None in counts:
+        phrase += (" and " if known else "") + "a rank count not recorded"
+    return phrase
+
+
 def _time_note(rows: list[dict]) -> str:
     with_, without = evaluation_minutes(rows, "with"), evaluation_minutes(rows, "without")
-    return (f"{with_ + without:.0f} min of evaluation on {mpi.size()} rank(s): "
+    return (f"{with_ + without:.0f} min of evaluation on {_ranks_phrase(rows)}: "
             f"{with_:.0f} with reinitialisation, {without:.0f} without")
 
 

@@ -169,6 +169,17 @@ def test_evaluation_runs_are_kept_and_reused(tmp_path, monkeypatch):
     again = reproduce.evaluate_cells(agents, episodes=1, max_steps=2, seed=0, cells=cells,
                                      cache=tmp_path / "runs")
     assert [{k: v for k, v in r.items()} for r in again] == first
+    # the minutes are said on the ranks that ran them, not on this invocation's
+    assert first[0]["ranks"] == 1 and "on 1 rank(s)" in reproduce._time_note(first)
+    saved = next((tmp_path / "runs").iterdir())
+    kept = json.loads(saved.read_text())
+    saved.write_text(json.dumps({**kept, "ranks": 32}))
+    assert "on 32 rank(s)" in reproduce._time_note(reproduce.evaluate_cells(
+        agents, episodes=1, max_steps=2, seed=0, cells=cells, cache=tmp_path / "runs"))
+    del kept["ranks"]  # a run cached before the count was recorded
+    saved.write_text(json.dumps(kept))
+    assert "on a rank count not recorded" in reproduce._time_note(reproduce.evaluate_cells(
+        agents, episodes=1, max_steps=2, seed=0, cells=cells, cache=tmp_path / "runs"))
     with pytest.raises(AssertionError, match="evaluated again"):  # other episodes: a new run
         reproduce.evaluate_cells(agents, episodes=2, max_steps=2, seed=0, cells=cells,
                                  cache=tmp_path / "runs")
