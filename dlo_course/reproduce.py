@@ -208,19 +208,19 @@ def evaluation_minutes(rows: list[dict], reinit: str | None = None) -> float:
 
 
 def _ranks_phrase(rows: list[dict]) -> str:
-    """The rank counts the runs behind ``rows`` were made on, from their records (runs cached
-    before the count was recorded say so instead of borrowing this invocation's)."""
-    counts = sorted({r.get("ranks") for r in rows}, key=lambda c: (c is None, c or 0))
-    known = [str(c) for c in counts if c is not None]
-    phrase = " or ".join(known) + " rank(s)" if known else ""
-    if None in counts:
-        phrase += (" and " if known else "") + "a rank count not recorded"
-    return phrase
+    """On how many ranks the runs behind ``rows`` were made, from their records; runs cached
+    before the count was recorded say so instead of borrowing this invocation's count."""
+    counts = {r.get("ranks") for r in rows}
+    known = sorted(c for c in counts if c is not None)
+    if not known:
+        return "on a rank count not recorded"
+    return (f"on {' or '.join(map(str, known))} rank(s)"
+            + (" (runs cached earlier: rank count not recorded)" if None in counts else ""))
 
 
 def _time_note(rows: list[dict]) -> str:
     with_, without = evaluation_minutes(rows, "with"), evaluation_minutes(rows, "without")
-    return (f"{with_ + without:.0f} min of evaluation on {_ranks_phrase(rows)}: "
+    return (f"{with_ + without:.0f} min of evaluation {_ranks_phrase(rows)}: "
             f"{with_:.0f} with reinitialisation, {without:.0f} without")
 
 

@@ -178,7 +178,7 @@ def test_evaluation_runs_are_kept_and_reused(tmp_path, monkeypatch):
         agents, episodes=1, max_steps=2, seed=0, cells=cells, cache=tmp_path / "runs"))
     del kept["ranks"]  # a run cached before the count was recorded
     saved.write_text(json.dumps(kept))
-    assert "on a rank count not recorded" in reproduce._time_note(reproduce.evaluate_cells(
+    assert "evaluation on a rank count not recorded" in reproduce._time_note(reproduce.evaluate_cells(
         agents, episodes=1, max_steps=2, seed=0, cells=cells, cache=tmp_path / "runs"))
     with pytest.raises(AssertionError, match="evaluated again"):  # other episodes: a new run
         reproduce.evaluate_cells(agents, episodes=2, max_steps=2, seed=0, cells=cells,
