@@ -111,6 +111,9 @@ episode; at the budget of the ``scene35`` seeds (260 episodes, equal transitions
     mpiexec -n 2 python benchmarks/seeds_table1.py run --nodes 4 --variant scene35-reset \
         --what "..." --agent S=data/checkpoints/seeds/i49_n4_reset_seedS
 
+Its seed 1, the like-test validation's pick (``benchmarks/validation_vs_test.py``), moved to
+``data/checkpoints/nodes4``; pass that folder for it (``--agent 1=data/checkpoints/nodes4``).
+
 Each agent's evaluation is cached in ``benchmarks/results/seeds/cache`` under its actor's
 digest (the cache of ``dlo-course reproduce``), so a stopped run resumes at the agent it was in
 and a report can be rebuilt on any machine. ``report`` writes
