@@ -173,13 +173,16 @@ def test_evaluation_runs_are_kept_and_reused(tmp_path, monkeypatch):
     assert first[0]["ranks"] == 1 and "on 1 rank(s)" in reproduce._time_note(first)
     saved = next((tmp_path / "runs").iterdir())
     kept = json.loads(saved.read_text())
+
+    def note_from_cache():
+        return reproduce._time_note(reproduce.evaluate_cells(
+            agents, episodes=1, max_steps=2, seed=0, cells=cells, cache=tmp_path / "runs"))
+
     saved.write_text(json.dumps({**kept, "ranks": 32}))
-    assert "on 32 rank(s)" in reproduce._time_note(reproduce.evaluate_cells(
-        agents, episodes=1, max_steps=2, seed=0, cells=cells, cache=tmp_path / "runs"))
+    assert "on 32 rank(s)" in note_from_cache()
     del kept["ranks"]  # a run cached before the count was recorded
     saved.write_text(json.dumps(kept))
-    assert "evaluation on a rank count not recorded" in reproduce._time_note(reproduce.evaluate_cells(
-        agents, episodes=1, max_steps=2, seed=0, cells=cells, cache=tmp_path / "runs"))
+    assert "evaluation on a rank count not recorded" in note_from_cache()
     with pytest.raises(AssertionError, match="evaluated again"):  # other episodes: a new run
         reproduce.evaluate_cells(agents, episodes=2, max_steps=2, seed=0, cells=cells,
                                  cache=tmp_path / "runs")
